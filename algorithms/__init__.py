@@ -1,0 +1,1 @@
+"""linkevo's algorithms layer."""

@@ -1,0 +1,1 @@
+"""linkevo's orchestrator layer."""

@@ -1,0 +1,58 @@
+"""Provides the `linkevo` command line: one entry point that dispatches to subcommands."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# Each subcommand module exposes `register(subparsers)`; the registered parser sets
+# `func(args) -> int`. Modules are imported only when the CLI starts, so one slow or
+# heavy import (Ray, torch) is paid only by the commands that need it at run time.
+COMMAND_MODULES = (
+    "orchestrator.commands.sim",
+    "orchestrator.commands.trial",
+    "orchestrator.commands.grid",
+    "orchestrator.commands.report",
+    "orchestrator.commands.hexapod",
+)
+
+
+class CliError(Exception):
+    """Bad command-line input; the message names the bad value and what is allowed."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Returns the parser with every available subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog="linkevo",
+        description="Evolve mechanical linkages for legged robots and run the experiments.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name == name:
+                continue
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Runs the CLI and returns the process exit code."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except CliError as exc:
+        print(f"linkevo {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"linkevo {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,1 @@
+"""The `linkevo` subcommands, one module each."""
