@@ -19,8 +19,7 @@ N_NODES = 1 + N_STATIC + 1 + N_BLOCKS
 MAX_BEAMS = 1 + 2 * N_BLOCKS
 """Crank plus two beams per triangle: 15."""
 LENGTH_GENES = np.array(
-    [CRANK_GENE]
-    + [FIRST_BLOCK + BLOCK_SIZE * i + k for i in range(N_BLOCKS) for k in (5, 6)],
+    [CRANK_GENE] + [FIRST_BLOCK + BLOCK_SIZE * i + k for i in range(N_BLOCKS) for k in (5, 6)],
     dtype=np.int64,
 )
 """The 15 length genes (crank, then l1 and l2 of each block), shape (15,)."""

@@ -1,0 +1,83 @@
+"""Benchmark: decode + simulate + F_p throughput of the kernel against the plain reference.
+
+Run: `.venv/bin/python benchmarks/sim_throughput.py` (options: --sizes, --repeats,
+--reference-size). Prints one line per measurement and, last, one JSON object with
+`evals_per_s` (the best 2-thread kernel figure) and `ratio_vs_reference` (kernel per core
+over reference per core).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+
+import numba
+import numpy as np
+
+from sim.evaluate import evaluate
+from sim.genome import random_genomes
+from sim.reference import evaluate_reference
+
+
+def best_seconds(fn, repeats: int) -> float:
+    """Returns the fastest wall time of `repeats` calls of fn()."""
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[5_000, 50_000])
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--reference-size", type=int, default=1_000)
+    parser.add_argument("--mode", default="paper", choices=["paper", "legacy"])
+    args = parser.parse_args()
+
+    rng = np.random.default_rng(2024)
+    machine = platform.processor() or platform.machine()
+    print(f"# {machine}, {os.cpu_count()} CPUs, numba {numba.__version__}")
+    evaluate(random_genomes(rng, 16), "Fp", args.mode)  # compile or load the cached kernel
+
+    results: dict[str, float] = {}
+    for n in args.sizes:
+        genomes = random_genomes(rng, n)
+        for threads in (1, 2):
+            numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+            seconds = best_seconds(lambda g=genomes: evaluate(g, "Fp", args.mode), args.repeats)
+            rate = n / seconds
+            results[f"kernel_{n}_{threads}t"] = rate
+            ms = seconds * 1e3
+            print(f"kernel    n={n:>6} threads={threads}: {rate:>12,.0f} evals/s ({ms:.1f} ms)")
+
+    genomes = random_genomes(rng, args.reference_size)
+    seconds = best_seconds(lambda: evaluate_reference(genomes, "Fp", args.mode), 1)
+    reference = args.reference_size / seconds
+    print(f"reference n={args.reference_size:>6} threads=1: {reference:>12,.0f} evals/s")
+
+    best_2t = max(v for k, v in results.items() if k.endswith("_2t"))
+    best_1t = max(v for k, v in results.items() if k.endswith("_1t"))
+    ratio = best_1t / reference
+    print(f"ratio kernel/reference per core: {ratio:,.0f}x; 2 threads: {best_2t / reference:,.0f}x")
+    print(
+        json.dumps(
+            {
+                "evals_per_s": round(best_2t),
+                "evals_per_s_1thread": round(best_1t),
+                "reference_evals_per_s": round(reference),
+                "ratio_vs_reference": round(ratio, 1),
+                "mode": args.mode,
+                **{k: round(v) for k, v in results.items()},
+            }
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,97 @@
+"""Provides LinkageBatch and `decode`: genomes to linkage topology at crank angle 0."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim import kernels
+from sim.evaluation import MODES
+from sim.genome import MAX_BEAMS, N_NODES, validate_genomes
+
+NODE_KINDS = ("motor", "static", "crank", "triangle", "extension")
+BEAM_KINDS = ("crank", "triangle", "extension")
+
+
+@dataclass(frozen=True)
+class LinkageBatch:
+    """N decoded linkages.
+
+    Attributes:
+        mode: "paper" or "legacy".
+        node_int: (N, 12, 4) int64 per node [kind, a, c, direction]; triangle a, c are
+            anchors A, C; extension a is the parent beam and c the inverted flag.
+        node_float: (N, 12, 3) float64 per node; triangle [l1, l2, backup angle];
+            extension [length, 0, 0]; static [x, y, 0]; crank tip [crank length, 0, 0].
+        beam_int: (N, 15, 6) int64 per beam [start, end, kind, parent, root, inversions],
+            -1 where absent (see `sim.kernels.decode_one`).
+        beam_length: (N, 15) float64, 0 where absent.
+        n_beams: (N,) int64.
+        positions0: (N, 12, 2) float64 node positions at crank angle 0.
+    """
+
+    mode: str
+    node_int: np.ndarray
+    node_float: np.ndarray
+    beam_int: np.ndarray
+    beam_length: np.ndarray
+    n_beams: np.ndarray
+    positions0: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.n_beams.shape[0])
+
+    @property
+    def node_kind(self) -> np.ndarray:
+        """(N, 12) int64 node kinds (indices into NODE_KINDS)."""
+        return self.node_int[:, :, 0]
+
+    @property
+    def beam_start(self) -> np.ndarray:
+        """(N, 15) int64 start node of each beam, -1 where absent."""
+        return self.beam_int[:, :, 0]
+
+    @property
+    def beam_end(self) -> np.ndarray:
+        """(N, 15) int64 end node of each beam, -1 where absent."""
+        return self.beam_int[:, :, 1]
+
+    @property
+    def beam_kind(self) -> np.ndarray:
+        """(N, 15) int64 beam kinds (indices into BEAM_KINDS), -1 where absent."""
+        return self.beam_int[:, :, 2]
+
+
+def check_mode(mode: str) -> bool:
+    """Returns True for legacy mode; raises ValueError naming the allowed modes."""
+    if mode not in MODES:
+        raise ValueError(f"unknown mode {mode!r}; allowed: {', '.join(MODES)}")
+    return mode == "legacy"
+
+
+def decode(genomes: np.ndarray, mode: str = "paper") -> LinkageBatch:
+    """Returns the decoded linkages of genomes (N, 56) (spec §1–2)."""
+    legacy = check_mode(mode)
+    genomes = validate_genomes(genomes)
+    n = genomes.shape[0]
+    batch = LinkageBatch(
+        mode=mode,
+        node_int=np.empty((n, N_NODES, 4), np.int64),
+        node_float=np.empty((n, N_NODES, 3)),
+        beam_int=np.empty((n, MAX_BEAMS, 6), np.int64),
+        beam_length=np.empty((n, MAX_BEAMS)),
+        n_beams=np.empty(n, np.int64),
+        positions0=np.empty((n, N_NODES, 2)),
+    )
+    kernels.decode_batch(
+        genomes,
+        legacy,
+        batch.node_int,
+        batch.node_float,
+        batch.beam_int,
+        batch.beam_length,
+        batch.n_beams,
+        batch.positions0,
+    )
+    return batch

@@ -1,0 +1,69 @@
+"""Provides Motion and `simulate`: every node's trajectory over one crank turn."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim import kernels
+from sim.decode import LinkageBatch
+from sim.genome import MAX_BEAMS, N_NODES
+
+DEFAULT_ANGLES = 40
+
+
+@dataclass(frozen=True)
+class Motion:
+    """Trajectories of N linkages over A crank angles.
+
+    Attributes:
+        positions: (N, 12, A, 2) float64 node positions, NaN at failed angles.
+        valid: (N, A) bool, True where the angle assembled.
+        beam_angles: (N, 15, A) float64 recorded beam angles, NaN at failed angles and
+            for absent beams.
+        foot: (N,) int64 index of the foot node.
+    """
+
+    positions: np.ndarray
+    valid: np.ndarray
+    beam_angles: np.ndarray
+    foot: np.ndarray
+
+    @property
+    def error(self) -> np.ndarray:
+        """(N,) int64 number of failed angles."""
+        return (~self.valid).sum(axis=1)
+
+
+def check_angles(n_angles: int) -> int:
+    """Returns n_angles if it is an int >= 2, else raises ValueError."""
+    if isinstance(n_angles, bool) or not isinstance(n_angles, int | np.integer) or n_angles < 2:
+        raise ValueError(f"n_angles must be an integer >= 2, got {n_angles!r}")
+    return int(n_angles)
+
+
+def simulate(batch: LinkageBatch, n_angles: int = DEFAULT_ANGLES) -> Motion:
+    """Returns the motion of decoded linkages over n_angles crank angles (spec §3)."""
+    n_angles = check_angles(n_angles)
+    n = len(batch)
+    motion = Motion(
+        positions=np.empty((n, N_NODES, n_angles, 2)),
+        valid=np.empty((n, n_angles), np.bool_),
+        beam_angles=np.full((n, MAX_BEAMS, n_angles), np.nan),
+        foot=np.empty(n, np.int64),
+    )
+    kernels.simulate_batch(
+        batch.node_int,
+        batch.node_float,
+        batch.beam_int,
+        batch.n_beams,
+        batch.positions0,
+        n_angles,
+        batch.mode == "legacy",
+        motion.positions,
+        motion.valid,
+        motion.beam_angles,
+        motion.foot,
+    )
+    return motion

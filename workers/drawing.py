@@ -1,0 +1,106 @@
+"""Provides linkage drawings: a still like the paper's Fig. 1 (PNG) or one crank turn (GIF)."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from sim.decode import decode
+from sim.evaluate import evaluate
+from sim.genome import validate_genomes
+from sim.kinematics import DEFAULT_ANGLES, simulate
+
+SUFFIXES = (".png", ".gif")
+
+
+def draw_linkage(
+    genome: np.ndarray,
+    mode: str,
+    path: Path,
+    *,
+    n_angles: int = DEFAULT_ANGLES,
+    title: str | None = None,
+) -> Path:
+    """Writes a drawing of one linkage to `path` (.png still, .gif one crank turn).
+
+    Shows the motor, static and moving nodes, the beams at the first crank angle (each
+    frame's angle in a GIF), the crank circle and the foot path. Returns `path`.
+    """
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        raise ValueError(f"drawing file must end in .png or .gif, got {path.name!r}")
+    genomes = validate_genomes(np.asarray(genome, dtype=np.float64).reshape(1, -1))
+    batch = decode(genomes, mode)
+    motion = simulate(batch, n_angles)
+    ev = evaluate(genomes, "Fp", mode, n_angles=n_angles)
+    valid = np.flatnonzero(motion.valid[0])
+    title = title or f"{mode} mode, foot node {int(ev.foot[0])}, error {int(ev.error[0])}"
+    tmp = path.with_name(f".{path.name}.tmp")
+    if path.suffix.lower() == ".png":
+        fig = _figure(batch, motion, ev, int(valid[0]), title)
+        fig.savefig(tmp, format="png", dpi=120)
+        _close(fig)
+    else:
+        frames = [_frame_image(_figure(batch, motion, ev, int(k), title)) for k in valid]
+        frames[0].save(
+            tmp, format="gif", save_all=True, append_images=frames[1:], duration=80, loop=0
+        )
+    tmp.replace(path)
+    return path
+
+
+def _figure(batch, motion, ev, k: int, title: str):
+    """Returns a matplotlib figure of linkage 0 of `batch` at sample k."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pos = motion.positions[0, :, :, :]
+    fig, ax = plt.subplots(figsize=(6, 6))
+    finite = pos[np.isfinite(pos[:, :, 0])]
+    lo, hi = finite.min(axis=0) - 1.5, finite.max(axis=0) + 1.5
+    crank = batch.node_float[0, 4, 0]
+    ax.add_patch(plt.Circle((0, 0), crank, fill=False, ls=":", color="0.6"))
+    ax.plot(ev.foot_x[0], ev.foot_y[0], "-x", color="tab:red", ms=4, lw=1, label="foot path")
+    for b in range(int(batch.n_beams[0])):
+        s, e = batch.beam_start[0, b], batch.beam_end[0, b]
+        ax.plot(*zip(pos[s, k], pos[e, k], strict=True), "-", color="0.25", lw=2.5, zorder=2)
+    kinds = batch.node_kind[0]
+    moving = kinds >= 2
+    ax.scatter(*pos[moving, k].T, s=40, c="white", edgecolors="k", zorder=3, label="moving node")
+    ax.scatter(*pos[kinds == 1, k].T, s=70, marker="s", c="tab:blue", zorder=3, label="static")
+    ax.scatter(
+        *pos[0, k], s=140, marker="o", c="tab:orange", edgecolors="k", zorder=4, label="motor"
+    )
+    foot = int(ev.foot[0])
+    ax.scatter(*pos[foot, k], s=90, marker="*", c="tab:red", zorder=5, label="foot")
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal")
+    ax.grid(True, lw=0.3)
+    ax.set_xlabel("x (LEGO modules)")
+    ax.set_ylabel("y (LEGO modules)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _frame_image(fig):
+    """Returns the figure rendered as a PIL image (palette mode for GIF) and closes it."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=72)
+    _close(fig)
+    buf.seek(0)
+    return Image.open(buf).convert("P", palette=Image.Palette.ADAPTIVE)
+
+
+def _close(fig) -> None:
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
