@@ -31,6 +31,8 @@ B_CRANK, B_TRIANGLE, B_EXTENSION = 0, 1, 2
 FP, FSL, FP2, FSL2 = 0, 1, 2, 3
 
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+ANGLE_ZERO_COS = np.ones(1)
+ANGLE_ZERO_SIN = np.zeros(1)
 
 
 @numba.njit(**_JIT)
@@ -65,45 +67,99 @@ def circle_intersection(p0x, p0y, p1x, p1y, r0, r1, direction, backup, legacy):
 
 
 @numba.njit(**_JIT)
-def beam_unit(b, bi, px, py, ux, uy):
-    """Returns beam b's unit direction (start -> end) at the current positions.
+def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
+    """Places the motor, static nodes and crank tip in every column (crank angle).
 
-    Crank and extension directions are kept in ux/uy (15,); a triangle beam's comes from
-    its end points ((1, 0) for a zero-length beam, as atan2(0, 0) = 0 would give).
+    xs/ys (12, A) receive positions; ux/uy (15, A) the crank's direction in row 0.
     """
-    if bi[b, 2] != B_TRIANGLE:
-        return ux[b], uy[b]
-    dx = px[bi[b, 1]] - px[bi[b, 0]]
-    dy = py[bi[b, 1]] - py[bi[b, 0]]
-    norm = math.sqrt(dx * dx + dy * dy)
-    if norm == 0.0:
-        return 1.0, 0.0
-    return dx / norm, dy / norm
+    crank = nf[4, 0]
+    for k in range(xs.shape[1]):
+        xs[0, k] = 0.0
+        ys[0, k] = 0.0
+        for s in range(1, 4):
+            xs[s, k] = nf[s, 0]
+            ys[s, k] = nf[s, 1]
+        xs[4, k] = crank * cos_t[k]
+        ys[4, k] = crank * sin_t[k]
+        ux[0, k] = cos_t[k]
+        uy[0, k] = sin_t[k]
 
 
 @numba.njit(**_JIT)
-def place_extension(new, b, ni, nf, bi, px, py, ux, uy):
-    """Places extension node `new` (its beam is b) along its parent beam's direction."""
-    parent = ni[new, 1]
-    dx, dy = beam_unit(parent, bi, px, py, ux, uy)
-    if ni[new, 2]:
-        dx = -dx
-        dy = -dy
-    start = bi[b, 0]
-    length = nf[new, 0]
-    px[new] = px[start] + length * dx
-    py[new] = py[start] + length * dy
-    ux[b] = dx
-    uy[b] = dy
+def place_node(new, b, ni, nf, bi, legacy, xs, ys, ux, uy, ok):
+    """Places added node `new` (its first beam is b) in every column of xs/ys.
+
+    One column per crank angle: the topology is shared, so the loops over columns carry
+    no data-dependent branches and vectorise. ok (A,) is cleared where a triangle has no
+    solution (spec §2 circle_intersection, steps 2 to 5, written as selects); positions
+    there are left meaningless. ux/uy (15, A) hold beam directions (see docs/simulator.md).
+    """
+    n = xs.shape[1]
+    if ni[new, 0] == EXTENSION:
+        parent = ni[new, 1]
+        if bi[parent, 2] == B_TRIANGLE:
+            s = bi[parent, 0]
+            e = bi[parent, 1]
+            for k in range(n):
+                dx = xs[e, k] - xs[s, k]
+                dy = ys[e, k] - ys[s, k]
+                norm = math.sqrt(dx * dx + dy * dy)
+                zero = norm == 0.0
+                ux[parent, k] = 1.0 if zero else dx / norm
+                uy[parent, k] = 0.0 if zero else dy / norm
+        sign = -1.0 if ni[new, 2] else 1.0
+        start = bi[b, 0]
+        length = nf[new, 0]
+        for k in range(n):
+            dx = sign * ux[parent, k]
+            dy = sign * uy[parent, k]
+            xs[new, k] = xs[start, k] + length * dx
+            ys[new, k] = ys[start, k] + length * dy
+            ux[b, k] = dx
+            uy[b, k] = dy
+        return
+    a = ni[new, 1]
+    c = ni[new, 2]
+    r0 = nf[new, 0]
+    r1 = nf[new, 1]
+    side = 1.0 if ni[new, 3] == 0 else -1.0
+    back_x = r0 * math.cos(nf[new, 2])
+    back_y = r0 * math.sin(nf[new, 2])
+    r_sum = r0 + r1
+    r_diff = abs(r0 - r1)
+    for k in range(n):
+        p0x = xs[a, k]
+        p0y = ys[a, k]
+        dx = xs[c, k] - p0x
+        dy = ys[c, k] - p0y
+        d = math.sqrt(dx * dx + dy * dy)
+        good = (d - TOL <= r_sum) & (d + TOL >= r_diff)
+        dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
+        ex = dx / dn
+        ey = dy / dn
+        along = (r0 * r0 - r1 * r1 + dn * dn) / (2.0 * dn)
+        h = side * math.sqrt(max(r0 * r0 - along * along, 0.0))
+        x = p0x + along * ex + h * ey
+        y = p0y + along * ey - h * ex
+        if legacy:
+            tangent = abs(d - r0 + r1) < TOL
+            x = p0x + r0 * ex if tangent else x
+            y = p0y + r0 * ey if tangent else y
+        coincident = (d == 0.0) & (r0 == r1)
+        x = (back_x if legacy else p0x + back_x) if coincident else x
+        y = (back_y if legacy else p0y + back_y) if coincident else y
+        xs[new, k] = x
+        ys[new, k] = y
+        ok[k] = ok[k] & good
 
 
 @numba.njit(**_JIT)
-def decode_one(g, legacy, ni, nf, bi, bf, px, py, ux, uy):
+def decode_one(g, legacy, ni, nf, bi, bf, xs, ys, ux, uy, ok):
     """Decodes one genome (56,) at crank angle 0; returns the number of beams.
 
     Fills ni (12, 4) int [kind, a, c, dir], nf (12, 3) float [p0, p1, p2], bi (15, 6) int
-    [start, end, kind, parent, root, inversions], bf (15,) beam lengths, px/py (12,)
-    positions at angle 0 and ux/uy (15,) crank and extension directions at angle 0.
+    [start, end, kind, parent, root, inversions], bf (15,) beam lengths, and the positions
+    at angle 0 in column 0 of xs/ys (12, >=1); ux/uy (15, >=1) and ok (>=1,) are scratch.
     Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle. Extension: a=parent beam,
     c=inverted, p0=length. Static: p0=x, p1=y. Crank tip: p0=crank length. An extension's
     root is the crank or triangle beam its chain of parents starts from, and inversions
@@ -114,26 +170,15 @@ def decode_one(g, legacy, ni, nf, bi, bf, px, py, ux, uy):
     bi[:] = -1
     bf[:] = 0.0
     ni[0, 0] = MOTOR
-    px[0] = 0.0
-    py[0] = 0.0
     for s in range(3):
         ni[1 + s, 0] = STATIC
-        x = float(int(g[2 * s] * 11) - 5)
-        y = float(int(g[2 * s + 1] * 11) - 5)
-        nf[1 + s, 0] = x
-        nf[1 + s, 1] = y
-        px[1 + s] = x
-        py[1 + s] = y
+        nf[1 + s, 0] = float(int(g[2 * s] * 11) - 5)
+        nf[1 + s, 1] = float(int(g[2 * s + 1] * 11) - 5)
     crank = 2.0 + 6.0 * g[CRANK_GENE]
     ni[4, 0] = CRANK
     nf[4, 0] = crank
-    px[4] = crank
-    py[4] = 0.0
     set_beam(bi, bf, 0, 0, 4, B_CRANK, -1, crank)
-    bi[0, 4] = 0
-    bi[0, 5] = 0
-    ux[0] = 1.0
-    uy[0] = 0.0
+    place_base(nf, ANGLE_ZERO_COS, ANGLE_ZERO_SIN, xs[:, :1], ys[:, :1], ux[:, :1], uy[:, :1])
     n_nodes = 5
     n_beams = 1
     for i in range(N_BLOCKS):
@@ -149,17 +194,15 @@ def decode_one(g, legacy, ni, nf, bi, bf, px, py, ux, uy):
             nf[new, 0] = length
             start = bi[parent, 0] if inverted else bi[parent, 1]
             set_beam(bi, bf, n_beams, start, new, B_EXTENSION, parent, length)
-            bi[n_beams, 4] = parent if bi[parent, 2] != B_EXTENSION else bi[parent, 4]
-            bi[n_beams, 5] = inverted + (bi[parent, 5] if bi[parent, 2] == B_EXTENSION else 0)
-            place_extension(new, n_beams, ni, nf, bi, px, py, ux, uy)
-            n_beams += 1
+            chained = bi[parent, 2] == B_EXTENSION
+            bi[n_beams, 4] = bi[parent, 4] if chained else parent
+            bi[n_beams, 5] = inverted + (bi[parent, 5] if chained else 0)
+            n_added = 1
         else:
             a = int(g[o + 1] * (n_nodes - 1)) + 1
             c = int(g[o + 2] * (n_nodes - 1)) + 1
-            c = repair_anchor(a, c, n_nodes, px, py)
-            direction = int(g[o + 3] * 2)
-            backup = 2.0 * math.pi * g[o + 4]
-            d = math.sqrt((px[a] - px[c]) ** 2 + (py[a] - py[c]) ** 2)
+            c = repair_anchor(a, c, n_nodes, xs[:, 0], ys[:, 0])
+            d = math.sqrt((xs[a, 0] - xs[c, 0]) ** 2 + (ys[a, 0] - ys[c, 0]) ** 2)
             s1 = max(d - L_MAX, L_MIN)
             l1 = (L_MAX - s1) * g[o + 5] + s1
             lo = abs(d - l1)
@@ -168,16 +211,17 @@ def decode_one(g, legacy, ni, nf, bi, bf, px, py, ux, uy):
             ni[new, 0] = TRIANGLE
             ni[new, 1] = a
             ni[new, 2] = c
-            ni[new, 3] = direction
+            ni[new, 3] = int(g[o + 3] * 2)
             nf[new, 0] = l1
             nf[new, 1] = l2
-            nf[new, 2] = backup
-            _, px[new], py[new] = circle_intersection(
-                px[a], py[a], px[c], py[c], l1, l2, direction, backup, legacy
-            )
+            nf[new, 2] = 2.0 * math.pi * g[o + 4]
             set_beam(bi, bf, n_beams, a, new, B_TRIANGLE, -1, l1)
             set_beam(bi, bf, n_beams + 1, c, new, B_TRIANGLE, -1, l2)
-            n_beams += 2
+            n_added = 2
+        place_node(
+            new, n_beams, ni, nf, bi, legacy, xs[:, :1], ys[:, :1], ux[:, :1], uy[:, :1], ok[:1]
+        )
+        n_beams += n_added
         n_nodes += 1
     return n_beams
 
@@ -226,49 +270,26 @@ def crank_angles(n_angles, legacy):
 
 
 @numba.njit(**_JIT)
-def solve_angle(cos_t, sin_t, ni, nf, bi, legacy, px, py, ux, uy):
-    """Places every node for a crank direction (cos_t, sin_t); False if a triangle fails."""
-    crank = nf[4, 0]
-    px[4] = crank * cos_t
-    py[4] = crank * sin_t
-    ux[0] = cos_t
-    uy[0] = sin_t
+def simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid):
+    """Simulates one decoded linkage over A crank angles; returns the error count.
+
+    cos_t/sin_t (A,) are the crank angles' cosines and sines; xs/ys (12, A) receive the
+    positions (NaN at failed angles); ux/uy (15, A) are scratch; valid (A,) receives
+    per-angle success.
+    """
+    place_base(nf, cos_t, sin_t, xs, ys, ux, uy)
+    valid[:] = True
     b = 1
     for new in range(5, N_NODES):
-        if ni[new, 0] == EXTENSION:
-            place_extension(new, b, ni, nf, bi, px, py, ux, uy)
-            b += 1
-        else:
-            a = ni[new, 1]
-            c = ni[new, 2]
-            ok, x, y = circle_intersection(
-                px[a], py[a], px[c], py[c], nf[new, 0], nf[new, 1], ni[new, 3], nf[new, 2], legacy
-            )
-            if not ok:
-                return False
-            px[new] = x
-            py[new] = y
-            b += 2
-    return True
-
-
-@numba.njit(**_JIT)
-def simulate_one(ni, nf, bi, px, py, ux, uy, theta, cos_t, sin_t, legacy, xs, ys, valid):
-    """Simulates one decoded linkage over the crank angles theta (A,); returns the error.
-
-    px/py (12,) hold the positions at angle 0 (static nodes are read from them) and are
-    overwritten; ux/uy (15,) are scratch; cos_t/sin_t (A,) are theta's cosines and sines.
-    xs/ys (12, A) receive positions (NaN at failed angles), valid (A,) per-angle success.
-    """
+        place_node(new, b, ni, nf, bi, legacy, xs, ys, ux, uy, valid)
+        b += 1 if ni[new, 0] == EXTENSION else 2
     error = 0
-    for k in range(theta.shape[0]):
-        ok = solve_angle(cos_t[k], sin_t[k], ni, nf, bi, legacy, px, py, ux, uy)
-        valid[k] = ok
-        if not ok:
+    for k in range(xs.shape[1]):
+        if not valid[k]:
             error += 1
-        for j in range(N_NODES):
-            xs[j, k] = px[j] if ok else np.nan
-            ys[j, k] = py[j] if ok else np.nan
+            for j in range(N_NODES):
+                xs[j, k] = np.nan
+                ys[j, k] = np.nan
     return error
 
 
@@ -301,13 +322,17 @@ def points_up(foot, k, ni, bi, n_beams, xs, ys, theta):
         dya = ys[foot, k] - ys[a, k]
         dxc = xs[foot, k] - xs[c, k]
         dyc = ys[foot, k] - ys[c, k]
-        # Both beams pointing down: both atan2 values lie in [-pi, 0), so the mean is
-        # negative. Both clearly up: both lie strictly inside (0, pi). Only the rest
-        # needs the angles themselves.
+        # The mean of the two atan2 angles lies in (0, pi) exactly when their sum lies in
+        # (0, 2 pi). Both down: both angles are negative. Both clearly up: both lie
+        # strictly inside (0, pi). One up, one down: the sum is positive exactly when the
+        # up beam turns further from +x than the mirrored down beam, a cross product.
+        # Only beams lying exactly on the x axis need the angles themselves.
         if dya < 0.0 and dyc < 0.0:
             return False
         if dya > 1e-9 * abs(dxa) and dyc > 1e-9 * abs(dxc):
             return True
+        if (dya > 0.0 and dyc < 0.0) or (dya < 0.0 and dyc > 0.0):
+            return dxa * dyc + dxc * dya > 0.0
     s = 0.0
     m = 0
     for b in range(n_beams):
@@ -347,15 +372,17 @@ def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy):
 
 
 @numba.njit(**_JIT)
-def find_foot(ys, valid):
-    """Returns the index of the node with the lowest recorded y (first on ties)."""
+def find_foot(ys):
+    """Returns the node with the lowest recorded y (first on ties; NaN samples never win)."""
     foot = 0
     best = np.inf
     for j in range(ys.shape[0]):
+        low = np.inf
         for k in range(ys.shape[1]):
-            if valid[k] and ys[j, k] < best:
-                best = ys[j, k]
-                foot = j
+            low = ys[j, k] if ys[j, k] < low else low
+        if low < best:
+            best = low
+            foot = j
     return foot
 
 
@@ -372,22 +399,30 @@ def compact_path(xs_foot, ys_foot, valid, px, py):
 
 
 @numba.njit(**_JIT)
-def point_distance(px, py, n, targets, use, cx, cy):
-    """Returns sum over targets t with use[t] of min over samples of |t - (p - centroid)|."""
-    total = 0.0
-    for t in range(targets.shape[0]):
-        if not use[t]:
-            continue
-        best = np.inf
-        tx = targets[t, 0]
-        ty = targets[t, 1]
-        for i in range(n):
-            ex = tx - (px[i] - cx)
-            ey = ty - (py[i] - cy)
+def nearest_squared(px, py, n, cx, cy, tx, ty, best):
+    """Fills best (P,) with each target's squared distance to its nearest sample.
+
+    Samples px/py (first n used) are taken relative to their centroid (cx, cy); targets
+    are tx/ty (P,). The inner loop runs over targets so that it vectorises.
+    """
+    best[:] = np.inf
+    for i in range(n):
+        qx = px[i] - cx
+        qy = py[i] - cy
+        for t in range(tx.shape[0]):
+            ex = tx[t] - qx
+            ey = ty[t] - qy
             d2 = ex * ex + ey * ey
-            if d2 < best:
-                best = d2
-        total += math.sqrt(best)
+            best[t] = d2 if d2 < best[t] else best[t]
+
+
+@numba.njit(**_JIT)
+def summed_distance(best, use):
+    """Returns the sum of sqrt(best[t]) over the targets t with use[t]."""
+    total = 0.0
+    for t in range(best.shape[0]):
+        if use[t]:
+            total += math.sqrt(best[t])
     return total
 
 
@@ -478,65 +513,57 @@ def evaluate_batch(
     theta = crank_angles(n_angles, legacy)
     cos_t = np.cos(theta)
     sin_t = np.sin(theta)
+    tx = targets[:, 0].copy()
+    ty = targets[:, 1].copy()
     is_lift = ~is_step
-    all_targets = np.ones(targets.shape[0], np.bool_)
+    every = np.ones(targets.shape[0], np.bool_)
     for chunk in numba.prange(n_chunks):
         ni = np.empty((N_NODES, 4), np.int64)
         nf = np.empty((N_NODES, 3))
         bi = np.empty((MAX_BEAMS, 6), np.int64)
         bf = np.empty(MAX_BEAMS)
-        px0 = np.empty(N_NODES)
-        py0 = np.empty(N_NODES)
-        ux = np.empty(MAX_BEAMS)
-        uy = np.empty(MAX_BEAMS)
-        graph = np.empty((N_NODES, 5), np.int64)
         xs = np.empty((N_NODES, n_angles))
         ys = np.empty((N_NODES, n_angles))
+        ux = np.empty((MAX_BEAMS, n_angles))
+        uy = np.empty((MAX_BEAMS, n_angles))
+        graph = np.empty((N_NODES, 5), np.int64)
         px = np.empty(n_angles)
         py = np.empty(n_angles)
+        best = np.empty(targets.shape[0])
         for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            n_beams = decode_one(genomes[i], legacy, ni, nf, bi, bf, px0, py0, ux, uy)
-            err = simulate_one(
-                ni, nf, bi, px0, py0, ux, uy, theta, cos_t, sin_t, legacy, xs, ys, valid[i]
-            )
-            f = find_foot(ys, valid[i])
+            n_beams = decode_one(genomes[i], legacy, ni, nf, bi, bf, xs, ys, ux, uy, valid[i])
+            err = simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid[i])
+            f = find_foot(ys)
             ae = angle_error(f, ni, bi, n_beams, xs, ys, valid[i], theta, legacy)
             error[i] = err
             foot[i] = f
             angle_err[i] = ae
-            for k in range(n_angles):
-                foot_x[i, k] = xs[f, k]
-                foot_y[i, k] = ys[f, k]
+            foot_x[i] = xs[f]
+            foot_y[i] = ys[f]
             m = compact_path(xs[f], ys[f], valid[i], px, py)
             cx = 0.0
             cy = 0.0
-            x_lo = np.inf
-            x_hi = -np.inf
-            y_lo = np.inf
-            y_hi = -np.inf
             for k in range(m):
                 cx += px[k]
                 cy += py[k]
-                x_lo = min(x_lo, px[k])
-                x_hi = max(x_hi, px[k])
-                y_lo = min(y_lo, py[k])
-                y_hi = max(y_hi, py[k])
             cx /= m
             cy /= m
             f_s, f_l = step_and_lift(px, py, m)
             penalty = err + ae
+            if fitness in (FP, FP2):
+                nearest_squared(px, py, m, cx, cy, tx, ty, best)
             if fitness == FP:
-                loss[i, 0] = point_distance(px, py, m, targets, all_targets, cx, cy) + penalty
+                loss[i, 0] = summed_distance(best, every) + penalty
             elif fitness == FP2:
-                loss[i, 0] = point_distance(px, py, m, targets, is_step, cx, cy) + penalty
-                loss[i, 1] = point_distance(px, py, m, targets, is_lift, cx, cy) + penalty
+                loss[i, 0] = summed_distance(best, is_step) + penalty
+                loss[i, 1] = summed_distance(best, is_lift) + penalty
             elif fitness == FSL:
                 loss[i, 0] = -0.8 * f_s - 0.2 * f_l + penalty
             else:
                 loss[i, 0] = -f_s + penalty
                 loss[i, 1] = -f_l + penalty
-            wh[i, 0] = y_hi - y_lo
-            wh[i, 1] = x_hi - x_lo
+            wh[i, 0] = py[:m].max() - py[:m].min()
+            wh[i, 1] = px[:m].max() - px[:m].min()
             structure(ni, bi, bf, n_beams, f, graph, st[i])
             lis[i, 0] = st[i, 0]
             lis[i, 1] = f_l
@@ -546,17 +573,18 @@ def evaluate_batch(
 def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
     """Decodes every genome at angle 0 into the packed topology arrays (see decode.py)."""
     for i in numba.prange(genomes.shape[0]):
-        px = np.empty(N_NODES)
-        py = np.empty(N_NODES)
-        ux = np.empty(MAX_BEAMS)
-        uy = np.empty(MAX_BEAMS)
-        n_beams[i] = decode_one(genomes[i], legacy, ni[i], nf[i], bi[i], bf[i], px, py, ux, uy)
-        pos0[i, :, 0] = px
-        pos0[i, :, 1] = py
+        xs = np.empty((N_NODES, 1))
+        ys = np.empty((N_NODES, 1))
+        ux = np.empty((MAX_BEAMS, 1))
+        uy = np.empty((MAX_BEAMS, 1))
+        ok = np.empty(1, np.bool_)
+        n_beams[i] = decode_one(genomes[i], legacy, ni[i], nf[i], bi[i], bf[i], xs, ys, ux, uy, ok)
+        pos0[i, :, 0] = xs[:, 0]
+        pos0[i, :, 1] = ys[:, 0]
 
 
 @numba.njit(parallel=True, **_JIT)
-def simulate_batch(ni, nf, bi, n_beams, pos0, n_angles, legacy, positions, valid, bang, foot):
+def simulate_batch(ni, nf, bi, n_beams, n_angles, legacy, positions, valid, bang, foot):
     """Simulates decoded linkages: positions (N, 12, A, 2), valid (N, A), bang (N, 15, A)."""
     theta = crank_angles(n_angles, legacy)
     cos_t = np.cos(theta)
@@ -564,12 +592,10 @@ def simulate_batch(ni, nf, bi, n_beams, pos0, n_angles, legacy, positions, valid
     for i in numba.prange(ni.shape[0]):
         xs = np.empty((N_NODES, n_angles))
         ys = np.empty((N_NODES, n_angles))
-        simulate_one(
-            ni[i], nf[i], bi[i], pos0[i, :, 0].copy(), pos0[i, :, 1].copy(),
-            np.empty(MAX_BEAMS), np.empty(MAX_BEAMS), theta, cos_t, sin_t, legacy, xs, ys,
-            valid[i],
-        )  # fmt: skip
-        foot[i] = find_foot(ys, valid[i])
+        ux = np.empty((MAX_BEAMS, n_angles))
+        uy = np.empty((MAX_BEAMS, n_angles))
+        simulate_one(ni[i], nf[i], bi[i], cos_t, sin_t, legacy, xs, ys, ux, uy, valid[i])
+        foot[i] = find_foot(ys)
         for k in range(n_angles):
             if valid[i, k]:
                 for b in range(n_beams[i]):

@@ -58,7 +58,6 @@ def simulate(batch: LinkageBatch, n_angles: int = DEFAULT_ANGLES) -> Motion:
         batch.node_float,
         batch.beam_int,
         batch.n_beams,
-        batch.positions0,
         n_angles,
         batch.mode == "legacy",
         motion.positions,
