@@ -15,7 +15,7 @@ import numpy as np
 from sim.genome import BLOCK_SIZE, CRANK_GENE, FIRST_BLOCK, MAX_BEAMS, N_BLOCKS, N_NODES
 
 TOL = 0.1
-"""circle_intersection's tolerance, as published."""
+"""The tolerance of circle_intersection (spec §2), as published."""
 L_MAX = 15.0
 L_MIN = 2.0
 MAX_ANCHOR_DIST = 30.0
@@ -33,37 +33,6 @@ FP, FSL, FP2, FSL2 = 0, 1, 2, 3
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 ANGLE_ZERO_COS = np.ones(1)
 ANGLE_ZERO_SIN = np.zeros(1)
-
-
-@numba.njit(**_JIT)
-def circle_intersection(p0x, p0y, p1x, p1y, r0, r1, direction, backup, legacy):
-    """Returns (ok, x, y): the point at r0 from P0 and r1 from P1 (spec §2)."""
-    dx = p1x - p0x
-    dy = p1y - p0y
-    d = math.sqrt(dx * dx + dy * dy)
-    if d - TOL > r0 + r1 or d + TOL < abs(r0 - r1):
-        return False, 0.0, 0.0
-    if d == 0.0 and r0 == r1:
-        if legacy:
-            return True, r0 * math.cos(backup), r0 * math.sin(backup)
-        return True, p0x + r0 * math.cos(backup), p0y + r0 * math.sin(backup)
-    if d > r0 + r1:
-        dn = d - TOL
-    elif d < abs(r0 - r1):
-        dn = d + TOL
-    else:
-        dn = d
-    ex = dx / dn
-    ey = dy / dn
-    if legacy and abs(d - r0 + r1) < TOL:
-        return True, p0x + r0 * ex, p0y + r0 * ey
-    a = (r0 * r0 - r1 * r1 + dn * dn) / (2.0 * dn)
-    h = math.sqrt(max(r0 * r0 - a * a, 0.0))
-    mx = p0x + a * ex
-    my = p0y + a * ey
-    if direction == 0:
-        return True, mx + h * ey, my - h * ex
-    return True, mx - h * ey, my + h * ex
 
 
 @numba.njit(**_JIT)
@@ -313,54 +282,80 @@ def recorded_angle(b, k, bi, xs, ys, theta):
 
 
 @numba.njit(**_JIT)
-def points_up(foot, k, ni, bi, n_beams, xs, ys, theta):
-    """Returns whether the mean recorded angle of the foot's beams lies in (0, pi)."""
+def up_by_sign(foot, k, ni, bi, b, xs, ys, theta):
+    """Returns 1 or 0 when signs alone settle whether the foot points up at sample k, else -1.
+
+    "Up" means the mean recorded angle of the beams ending at the foot lies in (0, pi);
+    b is the one beam ending at a crank-tip or extension foot. Every settled case agrees
+    with the angles themselves (`points_up`); a margin keeps clear of atan2 rounding to pi.
+    """
     if ni[foot, 0] == TRIANGLE:
-        a = ni[foot, 1]
-        c = ni[foot, 2]
-        dxa = xs[foot, k] - xs[a, k]
-        dya = ys[foot, k] - ys[a, k]
-        dxc = xs[foot, k] - xs[c, k]
-        dyc = ys[foot, k] - ys[c, k]
         # The mean of the two atan2 angles lies in (0, pi) exactly when their sum lies in
         # (0, 2 pi). Both down: both angles are negative. Both clearly up: both lie
         # strictly inside (0, pi). One up, one down: the sum is positive exactly when the
         # up beam turns further from +x than the mirrored down beam, a cross product.
-        # Only beams lying exactly on the x axis need the angles themselves.
+        dxa = xs[foot, k] - xs[ni[foot, 1], k]
+        dya = ys[foot, k] - ys[ni[foot, 1], k]
+        dxc = xs[foot, k] - xs[ni[foot, 2], k]
+        dyc = ys[foot, k] - ys[ni[foot, 2], k]
         if dya < 0.0 and dyc < 0.0:
-            return False
+            return 0
         if dya > 1e-9 * abs(dxa) and dyc > 1e-9 * abs(dxc):
-            return True
+            return 1
         if (dya > 0.0 and dyc < 0.0) or (dya < 0.0 and dyc > 0.0):
-            return dxa * dyc + dxc * dya > 0.0
+            return 1 if dxa * dyc + dxc * dya > 0.0 else 0
+        return -1
+    # One beam: its angle is its root's plus m times pi, the root's lying in [-pi, pi]
+    # (a triangle beam) or [0, 2 pi) (the crank); with m >= 2 it is at least pi.
+    root = bi[b, 4]
+    m = bi[b, 5]
+    if m >= 2:
+        return 0
+    if bi[root, 2] == B_CRANK:
+        return 1 if m == 0 and 0.0 < theta[k] < math.pi else 0
+    dx = xs[bi[root, 1], k] - xs[bi[root, 0], k]
+    dy = ys[bi[root, 1], k] - ys[bi[root, 0], k]
+    rise = dy if m == 0 else -dy
+    if rise > 1e-9 * abs(dx):
+        return 1
+    return 0 if rise <= 0.0 else -1
+
+
+@numba.njit(**_JIT)
+def points_up(foot, k, bi, n_beams, xs, ys, theta):
+    """Returns whether the mean recorded angle of the foot's beams lies in (0, pi)."""
     s = 0.0
     m = 0
     for b in range(n_beams):
         if bi[b, 1] == foot:
             s += recorded_angle(b, k, bi, xs, ys, theta)
             m += 1
-    if m == 0:
-        return False
-    mean = s / m
-    return 0.0 < mean < math.pi
+    return m > 0 and 0.0 < s / m < math.pi
 
 
 @numba.njit(**_JIT)
 def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy):
     """Returns F_ae for one simulated linkage (paper: count; legacy: distance-weighted)."""
-    n_angles = valid.shape[0]
     if ni[foot, 0] in (MOTOR, STATIC):
         return 0.0
-    total = 0.0
+    n_angles = valid.shape[0]
+    last = 0
+    for b in range(n_beams):
+        if bi[b, 1] == foot:
+            last = b
     prev = -1
     for k in range(n_angles - 1, -1, -1):
         if valid[k]:
             prev = k
             break
+    total = 0.0
     for k in range(n_angles):
         if not valid[k]:
             continue
-        if points_up(foot, k, ni, bi, n_beams, xs, ys, theta):
+        up = up_by_sign(foot, k, ni, bi, last, xs, ys, theta)
+        if up < 0:
+            up = points_up(foot, k, bi, n_beams, xs, ys, theta)
+        if up:
             if legacy:
                 total += math.sqrt(
                     (xs[foot, k] - xs[foot, prev]) ** 2 + (ys[foot, k] - ys[foot, prev]) ** 2
