@@ -1,0 +1,257 @@
+"""Provides field trials: walk an evolved linkage's robot, log distances to MLflow, build Table I.
+
+A field trial is one MLflow run (tag `linkevo.kind=field_trial`) in the source linkage's
+experiment: the measured distances (metric `distance_cm`, one step per repeat, and
+`mean_distance_cm`), the linkage document (`linkage.json`) and each repeat's telemetry.
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from hardware.config import RobotConfig
+from hardware.session import run_walk
+from workers.tracking import ensure_experiment
+
+if TYPE_CHECKING:
+    from mlflow.tracking import MlflowClient
+
+KIND_TAG = "linkevo.kind"
+KIND = "field_trial"
+ROBOTS = ("first", "modified")
+STUDY_APPROACHES = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
+"""Row order of the study's Table I; other approaches follow alphabetically."""
+
+
+class FieldTrialError(ValueError):
+    """Bad field-trial input: unknown run or cell, missing artefact, bad distance."""
+
+
+@dataclass(frozen=True)
+class LinkageRef:
+    """`RUN_ID` (the run's best linkage) or `RUN_ID:CELL` (one repertoire cell)."""
+
+    run_id: str
+    cell: int | None = None
+
+    @classmethod
+    def parse(cls, text: str) -> LinkageRef:
+        """Returns the reference parsed from `RUN_ID[:CELL]`."""
+        run_id, sep, cell = text.partition(":")
+        if not run_id or (sep and not cell.isdigit()):
+            raise FieldTrialError(
+                f"--linkage {text!r}: expected RUN_ID or RUN_ID:CELL "
+                "with CELL a non-negative integer"
+            )
+        return cls(run_id, int(cell) if sep else None)
+
+
+@dataclass(frozen=True)
+class SourceLinkage:
+    """The linkage to build, with the source run's identity and tags."""
+
+    run_id: str
+    cell: int | None
+    experiment_id: str
+    approach: str
+    fitness: str
+    document: dict
+
+
+def _download(client: MlflowClient, run_id: str, name: str, into: Path) -> Path:
+    from mlflow.exceptions import MlflowException
+
+    try:
+        return Path(client.download_artifacts(run_id, name, str(into)))
+    except (MlflowException, OSError) as exc:
+        raise FieldTrialError(f"run {run_id} has no artefact {name!r}") from exc
+
+
+def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
+    """Returns the linkage document a reference points at, with its run's tags.
+
+    A cell's genome is turned into a document with `sim.linkage_doc.to_document` in the
+    run's `mode` (param; default "paper").
+
+    Raises:
+        FieldTrialError: unknown run, missing artefact, or a cell not in the repertoire.
+    """
+    from mlflow.exceptions import MlflowException
+
+    try:
+        run = client.get_run(ref.run_id)
+    except MlflowException as exc:
+        raise FieldTrialError(f"--linkage: no MLflow run with id {ref.run_id!r}") from exc
+    tags = run.data.tags
+    with tempfile.TemporaryDirectory() as tmp:
+        if ref.cell is None:
+            path = _download(client, ref.run_id, "best_linkage.json", Path(tmp))
+            document = json.loads(path.read_text(encoding="utf-8"))
+        else:
+            document = _cell_document(client, ref, run.data.params.get("mode", "paper"), Path(tmp))
+    return SourceLinkage(
+        run_id=ref.run_id,
+        cell=ref.cell,
+        experiment_id=run.info.experiment_id,
+        approach=tags.get("approach", "unknown"),
+        fitness=tags.get("fitness", "unknown"),
+        document=document,
+    )
+
+
+def _cell_document(client: MlflowClient, ref: LinkageRef, mode: str, tmp: Path) -> dict:
+    import pyarrow.parquet as pq
+    from sim.linkage_doc import to_document
+
+    table = pq.read_table(_download(client, ref.run_id, "repertoire.parquet", tmp))
+    cells = table.column("cell").to_pylist()
+    if ref.cell not in cells:
+        raise FieldTrialError(
+            f"--linkage {ref.run_id}:{ref.cell}: cell {ref.cell} is not in the repertoire "
+            f"({len(cells)} filled cells)"
+        )
+    genome = np.asarray(table.column("genome")[cells.index(ref.cell)].as_py(), dtype=float)
+    return to_document(genome, mode)
+
+
+def walk_repeats(
+    config: RobotConfig,
+    *,
+    repeats: int,
+    seconds: float,
+    measure: Callable[[int], float],
+    telemetry_dir: Path,
+    simulate: bool = False,
+) -> tuple[list[float], list[Path]]:
+    """Walks `repeats` times and returns (distances in cm, telemetry CSV paths).
+
+    Args:
+        measure: called after repeat i (1-based) returns the measured distance in cm.
+    """
+    distances, files = [], []
+    for repeat in range(1, repeats + 1):
+        path = telemetry_dir / f"repeat_{repeat}.csv"
+        run_walk(config, seconds, telemetry=path, simulate=simulate)
+        files.append(path)
+        distance = float(measure(repeat))
+        if not np.isfinite(distance) or distance < 0:
+            raise FieldTrialError(f"distance {distance} cm: allowed a finite value >= 0")
+        distances.append(distance)
+    return distances, files
+
+
+def log_field_trial(
+    uri: str,
+    source: SourceLinkage,
+    *,
+    robot: str,
+    floor: str,
+    distances: list[float],
+    params: dict[str, str],
+    telemetry: tuple[Path, ...] | list[Path] = (),
+) -> str:
+    """Logs one field-trial run in the source's experiment and returns its run id."""
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=uri)
+    experiment_id = ensure_experiment(uri, client.get_experiment(source.experiment_id).name)
+    tags = {
+        KIND_TAG: KIND,
+        "source_run_id": source.run_id,
+        "source_cell": "best" if source.cell is None else str(source.cell),
+        "approach": source.approach,
+        "fitness": source.fitness,
+        "robot": robot,
+        "floor": floor,
+    }
+    run = client.create_run(
+        experiment_id, run_name=f"field-{source.approach}-{robot}-{floor}", tags=tags
+    )
+    run_id = run.info.run_id
+    for name, value in params.items():
+        client.log_param(run_id, name, value)
+    for step, distance in enumerate(distances):
+        client.log_metric(run_id, "distance_cm", distance, step=step)
+    client.log_metric(run_id, "mean_distance_cm", statistics.fmean(distances))
+    client.log_dict(run_id, source.document, "linkage.json")
+    for path in telemetry:
+        client.log_artifact(run_id, str(path), "telemetry")
+    client.set_terminated(run_id)
+    return run_id
+
+
+@dataclass(frozen=True)
+class TrialTable:
+    """Mean distance per (approach, robot, floor) over every logged repeat.
+
+    Attributes:
+        approaches: row order.
+        floors: column order within each robot (first seen first).
+        means: (approach, robot, floor) -> mean distance in cm.
+        counts: (approach, robot, floor) -> number of repeats.
+    """
+
+    approaches: tuple[str, ...]
+    floors: tuple[str, ...]
+    means: dict[tuple[str, str, str], float]
+    counts: dict[tuple[str, str, str], int]
+
+    def format(self) -> str:
+        """Returns the table as aligned text in the study's Table I layout."""
+        head = ["Approach"] + [f"{r.capitalize()} robot: {f}" for r in ROBOTS for f in self.floors]
+        rows = [head]
+        for approach in self.approaches:
+            cells = [approach]
+            for robot in ROBOTS:
+                for floor in self.floors:
+                    mean = self.means.get((approach, robot, floor))
+                    cells.append("–" if mean is None else f"{mean:.1f} cm")
+            rows.append(cells)
+        widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
+        lines = [" | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
+        lines.insert(1, "-+-".join("-" * w for w in widths))
+        return "\n".join(lines)
+
+
+def trial_table(uri: str, experiment: str) -> TrialTable:
+    """Returns the Table I summary of every field-trial run in the experiment."""
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=uri)
+    found = client.get_experiment_by_name(experiment)
+    if found is None:
+        raise FieldTrialError(f"--experiment {experiment!r} does not exist in {uri}")
+    runs = client.search_runs(
+        [found.experiment_id],
+        filter_string=f"tags.`{KIND_TAG}` = '{KIND}'",
+        order_by=["attributes.start_time ASC"],
+        max_results=10_000,
+    )
+    distances: dict[tuple[str, str, str], list[float]] = {}
+    floors: list[str] = []
+    for run in runs:
+        tags = run.data.tags
+        floor = tags.get("floor", "?")
+        if floor not in floors:
+            floors.append(floor)
+        key = (tags.get("approach", "unknown"), tags.get("robot", "first"), floor)
+        history = client.get_metric_history(run.info.run_id, "distance_cm")
+        distances.setdefault(key, []).extend(m.value for m in history)
+    present = {key[0] for key in distances}
+    approaches = tuple(a for a in STUDY_APPROACHES if a in present) + tuple(
+        sorted(present - set(STUDY_APPROACHES))
+    )
+    return TrialTable(
+        approaches=approaches,
+        floors=tuple(floors),
+        means={k: statistics.fmean(v) for k, v in distances.items() if v},
+        counts={k: len(v) for k, v in distances.items()},
+    )

@@ -1,0 +1,56 @@
+"""Provides run_walk: one guarded walk (start-up, alignment, walk, safe shutdown) from a config."""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable
+from pathlib import Path
+
+from hardware.config import RobotConfig
+from hardware.emulator import BusEmulator
+from hardware.errors import StopRequested
+from hardware.hexapod import Hexapod, WalkResult
+from hardware.safety import SignalGuard
+from hardware.telemetry import TelemetryWriter, TickRecord
+
+
+def run_walk(
+    config: RobotConfig,
+    seconds: float,
+    *,
+    telemetry: str | Path | None = None,
+    simulate: bool = False,
+    on_tick: Callable[[TickRecord], None] | None = None,
+) -> WalkResult:
+    """Walks the robot once and always leaves it stopped with torque off.
+
+    Args:
+        config: the robot config.
+        seconds: walking time (after start-up and alignment).
+        telemetry: CSV path for one row per tick; written atomically, kept on a stop.
+        simulate: run against an in-process bus emulator on a pty instead of the port.
+        on_tick: called with every tick's record (after the telemetry row).
+
+    Raises:
+        StopRequested: SIGINT or SIGTERM arrived; the motors were stopped first.
+    """
+    with contextlib.ExitStack() as stack:
+        if simulate:
+            emulator = stack.enter_context(BusEmulator(config.motor_ids))
+            config = config.with_port(emulator.port)
+        guard = stack.enter_context(SignalGuard())
+        sinks = [] if on_tick is None else [on_tick]
+        if telemetry is not None:
+            sinks.insert(0, stack.enter_context(TelemetryWriter(telemetry, config.motor_ids)))
+        robot = stack.enter_context(Hexapod(config))
+        robot.start_up()
+        robot.align(stop=guard.event)
+
+        def fan_out(record: TickRecord) -> None:
+            for sink in sinks:
+                sink(record)
+
+        result = robot.walk(seconds, on_tick=fan_out, stop=guard.event)
+    if guard.signal_name is not None:
+        raise StopRequested(guard.signal_name)
+    return result

@@ -1,0 +1,223 @@
+"""Provides `linkevo hexapod`: walk the robot, run field trials, print the study's Table I."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import sys
+import tempfile
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from orchestrator.cli import CliError
+
+if TYPE_CHECKING:
+    from hardware.config import RobotConfig
+
+DEFAULT_CONFIG = Path("configs/hexapod.toml")
+_TRACKING_HELP = "MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)"
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds the `hexapod` subcommand group (walk, trial, table)."""
+    parser = subparsers.add_parser(
+        "hexapod",
+        help="walk the MX-28 hexapod, run field trials, print the field-trial table",
+        description="Drives the study's hexapod (six Dynamixel MX-28AT, Protocol 2.0).",
+    )
+    sub = parser.add_subparsers(dest="hexapod_command", required=True, metavar="ACTION")
+
+    walk = sub.add_parser("walk", help="walk for a fixed time with the phase-locked tripod gait")
+    _robot_options(walk)
+    walk.add_argument("--seconds", type=float, required=True, help="walking time in seconds")
+    walk.add_argument("--telemetry", type=Path, default=None, help="CSV file, one row per tick")
+    walk.set_defaults(func=walk_handler)
+
+    trial = sub.add_parser("trial", help="walk an evolved linkage's robot and log the distances")
+    _robot_options(trial)
+    trial.add_argument("--linkage", required=True, help="source trial run: RUN_ID or RUN_ID:CELL")
+    trial.add_argument("--floor", required=True, help="floor name, e.g. flat or carpet")
+    trial.add_argument("--robot", default="first", help="first or modified (default: first)")
+    trial.add_argument("--repeats", type=int, default=5, help="walks on this floor (default 5)")
+    trial.add_argument("--seconds", type=float, default=10.0, help="seconds per walk (default 10)")
+    trial.add_argument(
+        "--distance-cm",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="D",
+        help="measured distances, one per repeat (default: asked on stdin after each walk)",
+    )
+    trial.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
+    trial.set_defaults(func=trial_handler)
+
+    table = sub.add_parser("table", help="print mean distances as in the study's Table I")
+    table.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
+    table.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+    table.set_defaults(func=table_handler)
+
+
+def _robot_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
+    )
+    parser.add_argument(
+        "--simulate", action="store_true", help="run against the built-in bus emulator on a pty"
+    )
+
+
+def _load(args: argparse.Namespace) -> RobotConfig:
+    from hardware.config import load_config
+    from hardware.errors import ConfigError
+
+    if not math.isfinite(args.seconds) or args.seconds <= 0:
+        raise CliError(f"--seconds {args.seconds}: allowed a positive number of seconds")
+    try:
+        return load_config(args.config)
+    except ConfigError as exc:
+        raise CliError(str(exc)) from exc
+
+
+def _exit_code(signal_name: str) -> int:
+    return 128 + int(getattr(signal, signal_name))
+
+
+def walk_handler(args: argparse.Namespace) -> int:
+    """Walks once and prints the achieved tick rate."""
+    from hardware.errors import HardwareError, StopRequested
+    from hardware.session import run_walk
+
+    config = _load(args)
+    try:
+        result = run_walk(config, args.seconds, telemetry=args.telemetry, simulate=args.simulate)
+    except StopRequested as exc:
+        print(f"linkevo hexapod walk: {exc}; motors stopped, torque off", file=sys.stderr)
+        return _exit_code(exc.signal_name)
+    except HardwareError as exc:
+        print(f"linkevo hexapod walk: {exc}; motors stopped, torque off", file=sys.stderr)
+        return 1
+    print(
+        f"walked {result.duration_s:.2f} s: {result.ticks} ticks at {result.rate_hz:.1f} Hz "
+        f"(target {config.gait.rate_hz:g} Hz), skipped {result.skipped_ticks}, "
+        f"missed reads {result.missed_reads}, reboots {result.reboots}, "
+        f"max phase error {math.degrees(result.max_phase_error_rad):.1f}°"
+    )
+    if args.telemetry is not None:
+        print(f"telemetry: {args.telemetry}")
+    return 0
+
+
+def _ask_distance(repeat: int) -> float:
+    while True:
+        try:
+            text = input(f"distance walked in repeat {repeat} (cm): ")
+        except EOFError as exc:
+            raise CliError(f"no distance given for repeat {repeat} (stdin closed)") from exc
+        try:
+            value = float(text)
+        except ValueError:
+            print(f"{text!r} is not a number; enter the distance in cm", file=sys.stderr)
+            continue
+        if math.isfinite(value) and value >= 0:
+            return value
+        print(f"{value} cm: allowed a finite value >= 0", file=sys.stderr)
+
+
+def trial_handler(args: argparse.Namespace) -> int:
+    """Walks the repeats, records the distances and logs a field-trial MLflow run."""
+    from mlflow.tracking import MlflowClient
+
+    from hardware.errors import HardwareError, StopRequested
+    from hardware.field_trial import (
+        ROBOTS,
+        FieldTrialError,
+        LinkageRef,
+        load_source,
+        log_field_trial,
+        walk_repeats,
+    )
+    from workers.tracking import resolve_tracking_uri
+
+    if args.robot not in ROBOTS:
+        raise CliError(f"--robot {args.robot!r}: allowed {', '.join(ROBOTS)}")
+    if args.repeats < 1:
+        raise CliError(f"--repeats {args.repeats}: allowed an integer >= 1")
+    if not args.floor.strip():
+        raise CliError("--floor '': allowed a non-empty floor name")
+    distances = args.distance_cm
+    if distances is not None:
+        if len(distances) != args.repeats:
+            raise CliError(
+                f"--distance-cm has {len(distances)} value(s); allowed exactly --repeats "
+                f"= {args.repeats}"
+            )
+        bad = [d for d in distances if not math.isfinite(d) or d < 0]
+        if bad:
+            raise CliError(f"--distance-cm {bad}: allowed finite values >= 0")
+    config = _load(args)
+    uri = resolve_tracking_uri(args.tracking_uri)
+    try:
+        source = load_source(MlflowClient(tracking_uri=uri), LinkageRef.parse(args.linkage))
+    except FieldTrialError as exc:
+        raise CliError(str(exc)) from exc
+
+    def measure(repeat: int) -> float:
+        return distances[repeat - 1] if distances is not None else _ask_distance(repeat)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            measured, files = walk_repeats(
+                config,
+                repeats=args.repeats,
+                seconds=args.seconds,
+                measure=measure,
+                telemetry_dir=Path(tmp),
+                simulate=args.simulate,
+            )
+        except StopRequested as exc:
+            print(f"linkevo hexapod trial: {exc}; nothing logged", file=sys.stderr)
+            return _exit_code(exc.signal_name)
+        except HardwareError as exc:
+            print(f"linkevo hexapod trial: {exc}; nothing logged", file=sys.stderr)
+            return 1
+        params = {
+            "seconds": str(args.seconds),
+            "repeats": str(args.repeats),
+            "config": str(args.config),
+            "simulated": str(args.simulate),
+        }
+        run_id = log_field_trial(
+            uri,
+            source,
+            robot=args.robot,
+            floor=args.floor,
+            distances=measured,
+            params=params,
+            telemetry=files,
+        )
+    mean = sum(measured) / len(measured)
+    print(
+        f"field trial {run_id}: {source.approach}, {args.robot} robot, floor {args.floor}: "
+        f"mean {mean:.1f} cm over {len(measured)} walk(s)"
+    )
+    return 0
+
+
+def table_handler(args: argparse.Namespace) -> int:
+    """Prints the field-trial means in the study's Table I layout."""
+    from hardware.field_trial import FieldTrialError, trial_table
+    from workers.tracking import resolve_tracking_uri
+
+    uri = resolve_tracking_uri(args.tracking_uri)
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).is_file():
+        raise CliError(f"--tracking-uri {uri!r}: no MLflow database there")
+    try:
+        table = trial_table(uri, args.experiment)
+    except FieldTrialError as exc:
+        raise CliError(str(exc)) from exc
+    if not table.means:
+        print(f"no field trials logged in experiment {args.experiment!r}")
+        return 0
+    print(table.format())
+    return 0

@@ -1,0 +1,171 @@
+"""Field trials round-trip through a real MLflow store (sqlite in tmp) into Table I."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+from mlflow.tracking import MlflowClient
+
+from hardware.field_trial import FieldTrialError, LinkageRef
+from orchestrator.cli import main
+from workers.tracking import ensure_experiment
+
+BEST_DOC = {"format": "test/1", "genome": [0.5] * 56, "note": "opaque to hardware/"}
+
+
+@pytest.fixture(scope="module")
+def store_uri(tmp_path_factory):
+    """One sqlite store per module (creating the schema is the slow part)."""
+    uri = f"sqlite:///{tmp_path_factory.mktemp('mlflow') / 'mlflow.db'}"
+    ensure_experiment(uri)
+    return uri
+
+
+@pytest.fixture
+def store(store_uri, request):
+    """Returns (uri, client, experiment id) with an experiment of this test's own."""
+    experiment_id = ensure_experiment(store_uri, f"hexapod-{request.node.name}")
+    return store_uri, MlflowClient(tracking_uri=store_uri), experiment_id
+
+
+def source_run(store, tmp_path, approach, genomes=None):
+    """Creates a trial run like linkevo's: tags, mode param, best linkage, repertoire."""
+    _, client, experiment_id = store
+    run = client.create_run(experiment_id, tags={"approach": approach, "fitness": "Fp"})
+    run_id = run.info.run_id
+    client.log_param(run_id, "mode", "paper")
+    client.log_dict(run_id, {**BEST_DOC, "approach": approach}, "best_linkage.json")
+    if genomes is not None:
+        table = pa.table(
+            {
+                "cell": pa.array(list(genomes), pa.int64()),
+                "genome": pa.array([list(g) for g in genomes.values()], pa.list_(pa.float64())),
+                "loss": pa.array([0.1] * len(genomes), pa.float64()),
+            }
+        )
+        path = tmp_path / "repertoire.parquet"
+        pq.write_table(table, path)
+        client.log_artifact(run_id, str(path))
+    client.set_terminated(run_id)
+    return run_id
+
+
+def trial(uri, cfg, linkage, floor, distances, *extra):
+    argv = ["hexapod", "trial", "--linkage", linkage, "--floor", floor, "--simulate",
+            "--config", str(cfg), "--seconds", "0.2", "--repeats", str(len(distances)),
+            "--tracking-uri", uri, *extra]  # fmt: skip
+    if distances:
+        argv += ["--distance-cm", *map(str, distances)]
+    return main(argv)
+
+
+def test_field_trials_round_trip_into_table_one(store, tmp_path, config_file, capsys):
+    uri, client, experiment_id = store
+    cfg = config_file("/dev/unused")
+    wh = source_run(store, tmp_path, "MAP-WH")
+    st = source_run(store, tmp_path, "MAP-ST")
+    assert trial(uri, cfg, wh, "flat", [70.0, 77.2]) == 0
+    assert trial(uri, cfg, wh, "carpet", [63.6]) == 0
+    assert trial(uri, cfg, st, "flat", [39.4]) == 0
+    assert trial(uri, cfg, st, "flat", [77.6], "--robot", "modified") == 0
+    runs = client.search_runs([experiment_id], "tags.`linkevo.kind` = 'field_trial'")
+    assert len(runs) == 4
+    first = next(
+        r for r in runs if r.data.tags["floor"] == "flat" and r.data.tags["approach"] == "MAP-WH"
+    )
+    tags = first.data.tags
+    assert tags["source_run_id"] == wh and tags["source_cell"] == "best"
+    assert (tags["approach"], tags["fitness"], tags["robot"]) == ("MAP-WH", "Fp", "first")
+    assert first.data.metrics["mean_distance_cm"] == pytest.approx(73.6)
+    history = client.get_metric_history(first.info.run_id, "distance_cm")
+    assert [(m.step, m.value) for m in history] == [(0, 70.0), (1, 77.2)]
+    local = client.download_artifacts(first.info.run_id, "linkage.json", str(tmp_path))
+    assert json.loads(Path(local).read_text(encoding="utf-8")) == {**BEST_DOC, "approach": "MAP-WH"}
+    files = [f.path for f in client.list_artifacts(first.info.run_id, "telemetry")]
+    assert files == ["telemetry/repeat_1.csv", "telemetry/repeat_2.csv"]
+
+    capsys.readouterr()
+    experiment = client.get_experiment(experiment_id).name
+    assert main(["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert [c.strip() for c in lines[0].split("|")] == [
+        "Approach",
+        "First robot: flat",
+        "First robot: carpet",
+        "Modified robot: flat",
+        "Modified robot: carpet",
+    ]
+    assert [c.strip() for c in lines[2].split("|")] == ["MAP-WH", "73.6 cm", "63.6 cm", "–", "–"]
+    assert [c.strip() for c in lines[3].split("|")] == ["MAP-ST", "39.4 cm", "–", "77.6 cm", "–"]
+
+
+def test_cell_reference_builds_the_document_from_the_repertoire_genome(
+    store, tmp_path, config_file, monkeypatch
+):
+    from sim.linkage_doc import from_document, to_document
+
+    uri, client, experiment_id = store
+    genome = np.random.default_rng(7).random(56)
+    run_id = source_run(store, tmp_path, "MAP-LIS", {17: genome, 4242: np.full(56, 0.3)})
+    monkeypatch.setattr("sys.stdin", io.StringIO("not a number\n40.4\n"))
+    argv = ["hexapod", "trial", "--linkage", f"{run_id}:17", "--floor", "carpet", "--simulate",
+            "--config", str(config_file("/dev/unused")), "--seconds", "0.2", "--repeats", "1",
+            "--tracking-uri", uri, "--robot", "modified"]  # fmt: skip
+    assert main(argv) == 0
+    (run,) = client.search_runs(
+        [experiment_id], "tags.`linkevo.kind` = 'field_trial' and tags.source_cell = '17'"
+    )
+    assert run.data.metrics["mean_distance_cm"] == pytest.approx(40.4)
+    local = client.download_artifacts(run.info.run_id, "linkage.json", str(tmp_path))
+    document = json.loads(Path(local).read_text(encoding="utf-8"))
+    rebuilt, mode = from_document(document)
+    assert mode == "paper"
+    assert np.allclose(rebuilt, genome)
+    assert document == json.loads(json.dumps(to_document(genome, "paper")))
+
+
+@pytest.mark.parametrize(
+    ("argv_tail", "message"),
+    [
+        (["--robot", "third"], "--robot 'third': allowed first, modified"),
+        (["--repeats", "0"], "--repeats 0: allowed an integer >= 1"),
+        (["--repeats", "2", "--distance-cm", "5"], "--distance-cm has 1 value(s)"),
+        (["--repeats", "1", "--distance-cm", "-5"], "--distance-cm [-5.0]: allowed finite"),
+    ],
+)
+def test_bad_trial_arguments_are_usage_errors(argv_tail, message, tmp_path, config_file, capsys):
+    uri = f"sqlite:///{tmp_path / 'never-created.db'}"
+    argv = ["hexapod", "trial", "--linkage", "abc", "--floor", "flat", "--simulate",
+            "--config", str(config_file("x")), "--tracking-uri", uri, *argv_tail]  # fmt: skip
+    assert main(argv) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "never-created.db").exists()
+
+
+def test_unknown_run_and_cell_are_named(store, tmp_path, config_file, capsys):
+    uri = store[0]
+    run_id = source_run(store, tmp_path, "MAP-AU", {3: np.full(56, 0.5)})
+    cfg = str(config_file("x"))
+    for linkage, message in [
+        ("0123abc", "no MLflow run with id '0123abc'"),
+        (f"{run_id}:99", f"--linkage {run_id}:99: cell 99 is not in the repertoire (1 filled"),
+        (f"{run_id}:x", "expected RUN_ID or RUN_ID:CELL"),
+    ]:
+        argv = ["hexapod", "trial", "--linkage", linkage, "--floor", "flat", "--simulate",
+                "--config", cfg, "--tracking-uri", uri, "--repeats", "1",
+                "--distance-cm", "1"]  # fmt: skip
+        assert main(argv) == 2
+        assert message in capsys.readouterr().err
+
+
+def test_linkage_ref_parsing():
+    assert LinkageRef.parse("abc") == LinkageRef("abc", None)
+    assert LinkageRef.parse("abc:12") == LinkageRef("abc", 12)
+    with pytest.raises(FieldTrialError, match="expected RUN_ID"):
+        LinkageRef.parse(":3")

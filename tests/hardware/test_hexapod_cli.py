@@ -1,0 +1,94 @@
+"""`linkevo hexapod walk`: tick rate, Ctrl-C in a real subprocess, bad input."""
+
+from __future__ import annotations
+
+import csv
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from hexapod_fixtures import TEST_IDS
+
+from hardware import control_table as ct
+from orchestrator.cli import main
+
+LINKEVO = Path(sys.executable).parent / "linkevo"
+
+
+def test_simulated_three_second_walk_holds_the_50_hz_clock(config_file, tmp_path, capsys):
+    telemetry = tmp_path / "out" / "walk.csv"
+    cfg = config_file("/dev/unused")
+    code = main(
+        ["hexapod", "walk", "--config", str(cfg), "--seconds", "3", "--simulate",
+         "--telemetry", str(telemetry)]
+    )  # fmt: skip
+    assert code == 0
+    with open(telemetry, newline="", encoding="utf-8") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    assert header[:5] == [
+        "time_s", "m1_position", "m1_velocity_rpm", "m1_load_percent", "m1_temperature_c"
+    ]  # fmt: skip
+    assert len(header) == 1 + 4 * len(TEST_IDS)
+    assert len(body) >= 150
+    times = [float(r[0]) for r in body]
+    assert times == sorted(times) and times[-1] < 3.0
+    assert "150 ticks" in capsys.readouterr().out
+    assert not list(telemetry.parent.glob(".walk.csv.*"))
+
+
+def test_sigint_to_a_walking_process_leaves_motors_stopped(emulator, config_file):
+    emu = emulator()
+    cfg = config_file(emu.port)
+    proc = subprocess.Popen(
+        [str(LINKEVO), "hexapod", "walk", "--config", str(cfg), "--seconds", "120"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and proc.poll() is None:
+            states = emu.snapshots().values()
+            if all(s.operating_mode == ct.VELOCITY_MODE and s.goal_velocity for s in states):
+                break
+            time.sleep(0.05)
+        time.sleep(0.5)
+        assert proc.poll() is None, proc.communicate()
+        moving = emu.snapshots()
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert all(s.torque_enabled and s.goal_velocity for s in moving.values())
+    assert proc.returncode == 130
+    assert "stopped by SIGINT; motors stopped, torque off" in err
+    for motor_id, state in emu.snapshots().items():
+        assert state.goal_velocity == 0, motor_id
+        assert not state.torque_enabled, motor_id
+
+
+def test_bad_config_is_a_usage_error_naming_the_value(tmp_path, capsys):
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text('[bus]\nport = "x"\n[[motors]]\nid = 300\n', encoding="utf-8")
+    assert main(["hexapod", "walk", "--config", str(cfg), "--seconds", "1"]) == 2
+    assert "id = 300 is out of range [0, 252]" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("seconds", ["0", "-1", "nan"])
+def test_non_positive_seconds_is_refused(seconds, config_file, capsys):
+    code = main(["hexapod", "walk", "--config", str(config_file("x")), "--seconds", seconds])
+    assert code == 2
+    assert f"--seconds {float(seconds)}: allowed a positive number" in capsys.readouterr().err
+
+
+def test_unreachable_port_is_reported(config_file, capsys):
+    code = main(
+        ["hexapod", "walk", "--config", str(config_file("/dev/no-such-port")), "--seconds", "1"]
+    )
+    assert code == 1
+    assert "cannot open port '/dev/no-such-port'" in capsys.readouterr().err

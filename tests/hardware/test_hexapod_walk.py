@@ -1,0 +1,240 @@
+"""The Hexapod against the bus emulator: start-up order, phase lock, safety and shutdown."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import os
+import signal
+import threading
+
+import numpy as np
+import pytest
+from hexapod_fixtures import TEST_IDS
+
+from hardware import control_table as ct
+from hardware import protocol as p
+from hardware.errors import (
+    AlignmentError,
+    HardwareError,
+    MotorNotResponding,
+    SafetyStop,
+    StopRequested,
+    WrongModel,
+)
+from hardware.gait import leg_phase, phase_separation
+from hardware.hexapod import Hexapod
+from hardware.session import run_walk
+
+PHASE_TOLERANCE_DEG = 5.0
+"""Tripods must stay within this of half a turn apart (and each leg of its own tripod)."""
+CLOCK_TOLERANCE_DEG = 30.0
+"""Every leg must stay within this of its clock target."""
+
+
+def assert_all_stopped(emu):
+    for motor_id, state in emu.snapshots().items():
+        assert state.goal_velocity == 0, f"motor {motor_id} still has a goal velocity"
+        assert not state.torque_enabled, f"motor {motor_id} still has torque on"
+
+
+def read_telemetry(path):
+    with open(path, newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    time_s = np.array([float(r["time_s"]) for r in rows])
+    positions = np.array([[int(r[f"m{i}_position"]) for i in TEST_IDS] for r in rows])
+    velocities = np.array([[float(r[f"m{i}_velocity_rpm"]) for i in TEST_IDS] for r in rows])
+    return time_s, positions, velocities
+
+
+def test_start_up_align_and_walk_write_in_the_documented_order(emulator, config_for):
+    emu = emulator()
+    config = config_for(emu.port)
+    with Hexapod(config) as robot:
+        robot.start_up()
+        robot.align()
+        walk_from = len(emu.packets())
+        result = robot.walk(0.3)
+    profile = round(ct.rpm_to_units(config.align.profile_velocity_rpm))
+    watchdog = config.safety.bus_watchdog_ms // 20
+    expected = [
+        (64, 0), (98, 0), (9, 0),  # start-up: torque off, watchdog off, return delay 0
+        (11, 3), (112, profile), (64, 1), (64, 0),  # align in position mode
+        (11, 1), (104, 0), (64, 1), (98, watchdog),  # velocity mode, then walk
+        (64, 0),  # shutdown
+    ]  # fmt: skip
+    for motor_id in TEST_IDS:
+        writes = [
+            (w.address, w.value)
+            for w in emu.writes()
+            if w.motor_id == motor_id and w.instruction == p.WRITE
+        ]
+        # A write retried after a slow reply shows up twice in a row; count it once.
+        writes = [w for i, w in enumerate(writes) if i == 0 or writes[i - 1] != w]
+        assert writes == expected, f"motor {motor_id}"
+    assert emu.snapshot(1).return_delay_time == 0
+    # Per tick: one SYNC_READ, then one SYNC_WRITE (none after a missed read).
+    walking = [q.instruction for q in emu.packets()[walk_from:]]
+    first_read = walking.index(p.SYNC_READ)
+    loop = walking[first_read : walking.index(p.WRITE, first_read) - 1]
+    assert set(loop) == {p.SYNC_READ, p.SYNC_WRITE}
+    assert loop.count(p.SYNC_WRITE) == result.ticks >= 1
+    assert loop.count(p.SYNC_READ) == result.ticks + result.missed_reads
+    assert all(a == p.SYNC_READ for a, b in itertools.pairwise(loop) if b == p.SYNC_WRITE)
+    assert result.ticks + result.skipped_ticks + result.missed_reads == 15
+    assert_all_stopped(emu)
+
+
+def test_ten_second_walk_keeps_tripods_half_a_turn_apart(emulator, config_for, tmp_path):
+    emu = emulator()
+    config = config_for(emu.port)
+    telemetry = tmp_path / "walk.csv"
+    result = run_walk(config, 10.0, telemetry=telemetry)
+    time_s, positions, velocities = read_telemetry(telemetry)
+    assert len(time_s) == result.ticks >= 450
+    zeros = np.array([m.zero for m in config.motors])
+    directions = np.array([m.direction for m in config.motors])
+    tripod_a = np.array([m.phase_deg == 0.0 for m in config.motors])
+    settled = time_s >= 1.0
+    tolerance = np.radians(PHASE_TOLERANCE_DEG)
+    for row in positions[settled]:
+        phases = leg_phase(row, zeros, directions)
+        assert abs(phase_separation(phases, tripod_a) - np.pi) <= tolerance
+        for tripod in (tripod_a, ~tripod_a):
+            spread = np.angle(np.exp(1j * (phases[tripod] - phases[tripod][0])))
+            assert np.all(np.abs(spread) <= tolerance)
+    # Direction signs: every leg turns forward by speed * time, reversed motors backwards.
+    turns = (positions[-1] - positions[0]) * directions / ct.POSITION_UNITS_PER_TURN
+    expected_turns = config.gait.speed_rpm / 60.0 * (time_s[-1] - time_s[0])
+    assert np.allclose(turns, expected_turns, rtol=0.05)
+    assert np.all(np.sign(velocities[settled]) == directions)
+    # Against the clock itself, the delay between a tick's time stamp and the emulator's
+    # sampling adds jitter (large on a loaded CI machine), hence a looser bound.
+    assert result.max_phase_error_rad <= np.radians(CLOCK_TOLERANCE_DEG)
+    assert_all_stopped(emu)
+
+
+def test_exception_mid_walk_leaves_every_motor_stopped(emulator, config_for):
+    emu = emulator()
+    seen = []
+
+    def explode(record):
+        seen.append(record)
+        if len(seen) == 10:
+            raise RuntimeError("operator code failed")
+
+    robot = Hexapod(config_for(emu.port))
+    with pytest.raises(RuntimeError, match="operator code failed"), robot:
+        robot.start_up()
+        robot.align()
+        robot.walk(5.0, on_tick=explode)
+    assert any(r.goal_velocities[1] != 0 for r in seen)
+    assert not robot.bus.is_open
+    assert_all_stopped(emu)
+
+
+def test_sigterm_mid_walk_stops_motors_and_keeps_telemetry(emulator, config_for, tmp_path):
+    emu = emulator()
+    previous = signal.getsignal(signal.SIGTERM)
+    ticks = []
+
+    def on_tick(record):
+        ticks.append(record)
+        if len(ticks) == 20:
+            threading.Thread(target=os.kill, args=(os.getpid(), signal.SIGTERM)).start()
+
+    with pytest.raises(StopRequested, match="stopped by SIGTERM"):
+        run_walk(config_for(emu.port), 30.0, telemetry=tmp_path / "t.csv", on_tick=on_tick)
+    assert signal.getsignal(signal.SIGTERM) is previous
+    assert 20 <= len(ticks) < 200
+    time_s, _, _ = read_telemetry(tmp_path / "t.csv")
+    assert len(time_s) == len(ticks)
+    assert_all_stopped(emu)
+
+
+def test_overheating_stops_the_walk_with_a_clear_message(emulator, config_for):
+    emu = emulator()
+
+    def heat_up(record):
+        if record.time_s > 0.2 and emu.snapshot(4).temperature == 30:
+            emu.heat(4, 60.0)
+
+    with pytest.raises(
+        SafetyStop,
+        match=r"^motor 4 \(right-front\): temperature 7\d °C reached the limit 70 °C; walk stopped",
+    ) as info:
+        run_walk(config_for(emu.port), 10.0, on_tick=heat_up)
+    assert info.value.motor_id == 4
+    assert_all_stopped(emu)
+
+
+def test_missing_motor_at_start_up_is_named(emulator, config_for):
+    emu = emulator([1, 2, 3, 4, 6])
+    with pytest.raises(MotorNotResponding, match=r"^motor 5 did not answer \(ping\)"):
+        run_walk(config_for(emu.port), 1.0)
+    assert_all_stopped(emu)
+
+
+def test_motor_that_stops_answering_mid_walk_is_named(emulator, config_for):
+    emu = emulator()
+
+    def unplug(record):
+        if len(emu.packets()) and record.time_s > 0.2:
+            emu.drop_replies(3, 10_000)
+
+    with pytest.raises(MotorNotResponding, match=r"motor 3 did not answer \(sync read\)"):
+        run_walk(config_for(emu.port), 10.0, on_tick=unplug)
+    assert_all_stopped(emu)
+
+
+def test_overload_is_rebooted_when_policy_allows(emulator, config_for):
+    emu = emulator()
+    config = config_for(emu.port, safety={"on_hardware_error": "reboot"})
+    injected = []
+
+    def overload(record):
+        if record.time_s > 0.3 and not injected:
+            injected.append(record.time_s)
+            emu.set_hardware_error(2, 1 << ct.OVERLOAD_BIT)
+
+    result = run_walk(config, 1.5, on_tick=overload)
+    assert result.reboots == 1
+    assert {q.motor_id for q in emu.packets() if q.instruction == p.REBOOT} == {2}
+    assert emu.snapshot(2).hardware_error == 0
+    assert_all_stopped(emu)
+
+
+def test_overload_stops_the_walk_under_the_default_policy(emulator, config_for):
+    emu = emulator()
+
+    def overload(record):
+        if record.time_s > 0.3:
+            emu.set_hardware_error(2, 1 << ct.OVERLOAD_BIT)
+
+    with pytest.raises(SafetyStop, match=r"motor 2 \(left-middle\): hardware error: overload"):
+        run_walk(config_for(emu.port), 5.0, on_tick=overload)
+    assert_all_stopped(emu)
+
+
+def test_wrong_model_is_refused_before_anything_moves(emulator, config_for):
+    emu = emulator(model_number=311)
+    with pytest.raises(WrongModel, match=r"motor 1 \(left-front\) reports model 311; expected"):
+        run_walk(config_for(emu.port), 1.0)
+    # Only the shutdown's Goal Velocity 0 and torque off were written.
+    assert {(w.address, w.value) for w in emu.writes()} == {(104, 0), (64, 0)}
+    assert_all_stopped(emu)
+
+
+def test_gait_faster_than_the_velocity_limit_is_refused(emulator, config_for):
+    emu = emulator(velocity_limit=100)
+    with pytest.raises(HardwareError, match=r"motor 1 \(left-front\): gait speed 30 rpm .* is 100"):
+        run_walk(config_for(emu.port), 1.0)
+    assert_all_stopped(emu)
+
+
+def test_alignment_timeout_names_the_late_legs(emulator, config_for):
+    emu = emulator()
+    config = config_for(emu.port, align={"profile_velocity_rpm": 1.0, "timeout_s": 0.2})
+    with pytest.raises(AlignmentError, match=r"motor 2 \(left-middle\).*did not reach"):
+        run_walk(config, 1.0)
+    assert_all_stopped(emu)
