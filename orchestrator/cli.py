@@ -14,6 +14,7 @@ COMMAND_MODULES = (
     "orchestrator.commands.trial",
     "orchestrator.commands.grid",
     "orchestrator.commands.report",
+    "orchestrator.commands.pull",
     "orchestrator.commands.hexapod",
 )
 

@@ -129,14 +129,8 @@ def trial_handler(args: argparse.Namespace) -> int:
     from mlflow.tracking import MlflowClient
 
     from hardware.errors import HardwareError, StopRequested
-    from hardware.field_trial import (
-        ROBOTS,
-        FieldTrialError,
-        LinkageRef,
-        load_source,
-        log_field_trial,
-        walk_repeats,
-    )
+    from hardware.field_trial import ROBOTS, log_field_trial, walk_repeats
+    from workers.linkages import LinkageError, LinkageRef, load_source
     from workers.tracking import resolve_tracking_uri
 
     if args.robot not in ROBOTS:
@@ -159,7 +153,7 @@ def trial_handler(args: argparse.Namespace) -> int:
     uri = resolve_tracking_uri(args.tracking_uri)
     try:
         source = load_source(MlflowClient(tracking_uri=uri), LinkageRef.parse(args.linkage))
-    except FieldTrialError as exc:
+    except LinkageError as exc:
         raise CliError(str(exc)) from exc
 
     def measure(repeat: int) -> float:

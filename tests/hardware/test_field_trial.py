@@ -12,8 +12,8 @@ import pyarrow.parquet as pq
 import pytest
 from mlflow.tracking import MlflowClient
 
-from hardware.field_trial import FieldTrialError, LinkageRef
 from orchestrator.cli import main
+from workers.linkages import LinkageError, LinkageRef
 from workers.tracking import ensure_experiment
 
 BEST_DOC = {"format": "test/1", "genome": [0.5] * 56, "note": "opaque to hardware/"}
@@ -167,5 +167,5 @@ def test_unknown_run_and_cell_are_named(store, tmp_path, config_file, capsys):
 def test_linkage_ref_parsing():
     assert LinkageRef.parse("abc") == LinkageRef("abc", None)
     assert LinkageRef.parse("abc:12") == LinkageRef("abc", 12)
-    with pytest.raises(FieldTrialError, match="expected RUN_ID"):
+    with pytest.raises(LinkageError, match="expected RUN_ID"):
         LinkageRef.parse(":3")
