@@ -1,1 +1,41 @@
-"""linkevo's algorithms layer."""
+"""linkevo's search algorithms: ask/tell optimisers on numpy arrays (no Ray, MLflow or files)."""
+
+from algorithms.archive import GridArchive, elite_rows
+from algorithms.ea import EvolutionaryAlgorithm
+from algorithms.factory import APPROACHES, eval_fitness, make_optimizer
+from algorithms.individuals import Individuals
+from algorithms.map_elites import MapElites
+from algorithms.mutation import bounce_back, initial_sigma, mutate
+from algorithms.nsga2 import NSGA2
+from algorithms.optimizer import BaseOptimizer, Optimizer
+from algorithms.pareto import crowding_distance, hypervolume_2d, non_dominated_ranks, select_nsga2
+from algorithms.population import PopulationOptimizer
+from algorithms.scoring import HV_REFERENCES, QD_OFFSETS, TWO_OBJECTIVE, scalar_loss
+from algorithms.selection import tournament
+
+__all__ = [
+    "APPROACHES",
+    "HV_REFERENCES",
+    "NSGA2",
+    "QD_OFFSETS",
+    "TWO_OBJECTIVE",
+    "BaseOptimizer",
+    "EvolutionaryAlgorithm",
+    "GridArchive",
+    "Individuals",
+    "MapElites",
+    "Optimizer",
+    "PopulationOptimizer",
+    "bounce_back",
+    "crowding_distance",
+    "elite_rows",
+    "eval_fitness",
+    "hypervolume_2d",
+    "initial_sigma",
+    "make_optimizer",
+    "mutate",
+    "non_dominated_ranks",
+    "scalar_loss",
+    "select_nsga2",
+    "tournament",
+]

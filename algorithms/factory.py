@@ -1,0 +1,76 @@
+"""Provides make_optimizer: one constructor for every approach of the study."""
+
+from __future__ import annotations
+
+from algorithms.ea import EvolutionaryAlgorithm
+from algorithms.map_elites import MapElites
+from algorithms.nsga2 import NSGA2
+from algorithms.optimizer import Optimizer
+from algorithms.scoring import TWO_OBJECTIVE
+
+APPROACHES: tuple[str, ...] = ("EA", "NSGA2", "MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
+"""Every approach `make_optimizer` builds."""
+_OPTIONS: dict[str, tuple[str, ...]] = {
+    "EA": ("coverage_space", "initial_sigma"),
+    "NSGA2": ("coverage_space", "initial_sigma"),
+    "MAP-WH": ("initial_sigma",),
+    "MAP-LIS": ("initial_sigma",),
+    "MAP-ST": ("initial_sigma",),
+}
+
+
+def eval_fitness(approach: str, fitness: str) -> str:
+    """Returns the `sim.evaluate` fitness an approach needs: "Fp2"/"Fsl2" for NSGA2."""
+    return TWO_OBJECTIVE[fitness] if approach == "NSGA2" else fitness
+
+
+def make_optimizer(
+    approach: str,
+    *,
+    fitness: str,
+    batch_size: int,
+    mode: str,
+    seed: int,
+    n_angles: int = 40,
+    **options: object,
+) -> Optimizer:
+    """Returns a fresh optimizer for `approach`.
+
+    Args:
+        approach: one of `APPROACHES`.
+        fitness: "Fp" or "Fsl" (NSGA-II evaluates "Fp2"/"Fsl2"; see `eval_fitness`).
+        batch_size: genomes per ask, B (also the initial population and EA/NSGA-II
+            population size).
+        mode: "paper" or "legacy".
+        seed: seed of the optimizer's random stream.
+        n_angles: crank angles per evaluation.
+        **options: approach-specific settings: `initial_sigma` (all but MAP-AU),
+            `coverage_space` (EA, NSGA2); MAP-AU passes all of them to `AuroraMapElites`.
+
+    Raises:
+        ValueError: naming an unknown approach or option, or a bad setting.
+    """
+    common = {
+        "fitness": fitness,
+        "batch_size": batch_size,
+        "mode": mode,
+        "seed": seed,
+        "n_angles": n_angles,
+    }
+    if approach == "MAP-AU":
+        from algorithms.aurora import AuroraMapElites
+
+        return AuroraMapElites(**common, **options)
+    if approach not in _OPTIONS:
+        raise ValueError(f"unknown approach {approach!r}; allowed: {', '.join(APPROACHES)}")
+    unknown = sorted(set(options) - set(_OPTIONS[approach]))
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {', '.join(map(repr, unknown))} for {approach}; "
+            f"allowed: {', '.join(_OPTIONS[approach])}"
+        )
+    if approach == "EA":
+        return EvolutionaryAlgorithm(**common, **options)
+    if approach == "NSGA2":
+        return NSGA2(**common, **options)
+    return MapElites(approach=approach, **common, **options)

@@ -1,0 +1,60 @@
+"""Provides Individuals: the genomes and evaluation results a population or archive keeps."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Individuals:
+    """N evaluated genomes, row-aligned.
+
+    Attributes:
+        genome: (N, 56) float64 in [0, 1).
+        sigma: (N, S) float64 mutation strengths (S = 1 paper, 2 legacy).
+        loss: (N,) or (N, 2) float64 losses to minimise.
+        error: (N,) int64 failed crank angles.
+        angle_error: (N,) float64 F_ae.
+        desc: (N, D) float64 continuous descriptors.
+        foot_x: (N, A) float64 foot path x, NaN at failed angles.
+        foot_y: (N, A) float64 foot path y, NaN at failed angles.
+    """
+
+    genome: np.ndarray
+    sigma: np.ndarray
+    loss: np.ndarray
+    error: np.ndarray
+    angle_error: np.ndarray
+    desc: np.ndarray
+    foot_x: np.ndarray
+    foot_y: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.genome.shape[0])
+
+    def take(self, index: np.ndarray) -> Individuals:
+        """Returns the rows `index` (any numpy index over N)."""
+        return Individuals(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    @staticmethod
+    def concat(parts: list[Individuals]) -> Individuals:
+        """Returns the row-wise concatenation of `parts`, in order."""
+        return Individuals(
+            **{
+                f.name: np.concatenate([getattr(p, f.name) for p in parts], axis=0)
+                for f in fields(Individuals)
+            }
+        )
+
+    def to_state(self, prefix: str) -> dict[str, np.ndarray]:
+        """Returns the arrays keyed `<prefix>.<field>`, for an npz state dict."""
+        return {f"{prefix}.{f.name}": getattr(self, f.name) for f in fields(self)}
+
+    @staticmethod
+    def from_state(state: dict[str, np.ndarray], prefix: str) -> Individuals:
+        """Returns the Individuals stored by `to_state(prefix)`."""
+        return Individuals(
+            **{f.name: np.asarray(state[f"{prefix}.{f.name}"]) for f in fields(Individuals)}
+        )

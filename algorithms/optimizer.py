@@ -1,0 +1,300 @@
+"""Provides the Optimizer protocol and the ask/tell machinery every approach shares."""
+
+from __future__ import annotations
+
+import json
+from typing import Protocol
+
+import numpy as np
+
+from algorithms.individuals import Individuals
+from algorithms.mutation import initial_sigma, mutate, n_sigmas
+from algorithms.rng_state import decode_rng, encode_rng
+from algorithms.scoring import QD_OFFSETS, TWO_OBJECTIVE, scalar_loss
+from sim.evaluation import Evaluation
+from sim.genome import random_genomes
+
+SINGLE_FITNESSES: tuple[str, ...] = ("Fp", "Fsl")
+"""The fitness functions a trial optimises (NSGA-II evaluates their two-objective variants)."""
+
+
+class Optimizer(Protocol):
+    """What the trial loop drives: ask for genomes, tell their evaluation, report."""
+
+    approach: str
+
+    @property
+    def eval_fitness(self) -> str:
+        """The `sim.evaluate` fitness name the evaluator must use."""
+        ...
+
+    @property
+    def evaluations(self) -> int:
+        """Genomes told so far."""
+        ...
+
+    @property
+    def iteration(self) -> int:
+        """Completed ask/tell rounds (the initial population is round 1)."""
+        ...
+
+    def ask(self) -> np.ndarray:
+        """Returns the next batch of genomes to evaluate, (B, 56)."""
+        ...
+
+    def tell(self, genomes: np.ndarray, evaluation: Evaluation) -> None:
+        """Takes the evaluation of the genomes the last `ask` returned."""
+        ...
+
+    def metrics(self) -> dict[str, float]:
+        """Returns evaluations, best_loss, mean_loss, coverage, qd_score (and extras)."""
+        ...
+
+    def best(self) -> tuple[np.ndarray, float]:
+        """Returns the best genome (56,) kept and its single-objective loss."""
+        ...
+
+    def view(self) -> dict[str, np.ndarray]:
+        """Returns the kept population or repertoire as named columns (1-D or (N, k))."""
+        ...
+
+    def settings(self) -> dict[str, object]:
+        """Returns the JSON-able settings that define the optimizer."""
+        ...
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Returns the whole search state as npz-safe numpy arrays."""
+        ...
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restores a state from `state_dict`, so the search continues identically."""
+        ...
+
+
+class BaseOptimizer:
+    """The ask/tell plumbing: the random initial batch, mutation, counters and state.
+
+    Subclasses choose parents (`_parents`), keep survivors (`_survive`), report
+    (`_summary`, `_columns`) and add their own state (`_state`, `_load_state`).
+
+    Args:
+        fitness: "Fp" or "Fsl", the loss the study optimises.
+        batch_size: genomes per ask (B); also the initial population.
+        mode: "paper" or "legacy" (mutation and sigma count).
+        seed: seeds the optimizer's own random stream.
+        n_angles: crank angles of the evaluations (A, the foot path length).
+        initial_sigma: fixed initial mutation strength; None draws it uniformly in [0, 1).
+    """
+
+    approach: str = ""
+    multi_objective: bool = False
+
+    def __init__(
+        self,
+        *,
+        fitness: str,
+        batch_size: int,
+        mode: str,
+        seed: int,
+        n_angles: int = 40,
+        initial_sigma: float | None = None,
+    ) -> None:
+        if fitness not in SINGLE_FITNESSES:
+            raise ValueError(f"unknown fitness {fitness!r}; allowed: {', '.join(SINGLE_FITNESSES)}")
+        if (
+            isinstance(batch_size, bool)
+            or not isinstance(batch_size, int | np.integer)
+            or batch_size < 1
+        ):
+            raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
+        n_sigmas(mode)
+        if initial_sigma is not None and not 0.0 <= initial_sigma < 1.0:
+            raise ValueError(f"initial_sigma must be in [0, 1) or None, got {initial_sigma!r}")
+        self.fitness = fitness
+        self.batch_size = int(batch_size)
+        self.mode = mode
+        self.seed = int(seed)
+        self.n_angles = int(n_angles)
+        self.initial_sigma = initial_sigma
+        self.qd_offset = QD_OFFSETS[fitness]
+        self._rng = np.random.default_rng(self.seed)
+        self._evaluations = 0
+        self._iteration = 0
+        self._pending: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def eval_fitness(self) -> str:
+        """The `sim.evaluate` fitness name: the two-objective variant for NSGA-II."""
+        return TWO_OBJECTIVE[self.fitness] if self.multi_objective else self.fitness
+
+    @property
+    def evaluations(self) -> int:
+        """Genomes told so far."""
+        return self._evaluations
+
+    @property
+    def iteration(self) -> int:
+        """Completed ask/tell rounds (the initial population is round 1)."""
+        return self._iteration
+
+    def ask(self) -> np.ndarray:
+        """Returns the next batch, (B, 56): random genomes first, then mutated parents."""
+        if self._pending is not None:
+            raise RuntimeError("ask() called twice without tell(); tell the last batch first")
+        if self._iteration == 0:
+            genomes = random_genomes(self._rng, self.batch_size)
+            sigma = initial_sigma(self._rng, self.batch_size, self.mode, self.initial_sigma)
+        else:
+            genomes, sigma = mutate(*self._parents(), self._rng, self.mode)
+        self._pending = (genomes, sigma)
+        return genomes.copy()
+
+    def tell(self, genomes: np.ndarray, evaluation: Evaluation) -> None:
+        """Takes the evaluation of the last asked batch and selects survivors.
+
+        Args:
+            genomes: (B, 56), the genomes the last `ask` returned.
+            evaluation: their `sim.evaluate(..., fitness=self.eval_fitness)` result.
+        """
+        if self._pending is None:
+            raise RuntimeError("tell() called without a pending ask()")
+        asked, sigma = self._pending
+        if not np.array_equal(np.asarray(genomes), asked):
+            raise ValueError("tell() needs exactly the genomes the last ask() returned")
+        expected = (len(asked), 2) if self.multi_objective else (len(asked),)
+        loss = np.asarray(evaluation.loss, dtype=np.float64)
+        if loss.shape != expected:
+            raise ValueError(
+                f"{self.approach} needs losses of shape {expected} "
+                f"(fitness {self.eval_fitness}), got {loss.shape}"
+            )
+        batch = Individuals(
+            genome=asked,
+            sigma=sigma,
+            loss=loss,
+            error=np.asarray(evaluation.error, dtype=np.int64),
+            angle_error=np.asarray(evaluation.angle_error, dtype=np.float64),
+            desc=np.asarray(self.descriptors_of(asked, evaluation), dtype=np.float64),
+            foot_x=np.asarray(evaluation.foot_x, dtype=np.float64),
+            foot_y=np.asarray(evaluation.foot_y, dtype=np.float64),
+        )
+        self._survive(batch, initial=self._iteration == 0)
+        self._evaluations += len(batch)
+        self._iteration += 1
+        self._pending = None
+
+    def descriptors_of(self, genomes: np.ndarray, evaluation: Evaluation) -> np.ndarray:
+        """Returns the continuous descriptors (B, D) kept with each told genome."""
+        raise NotImplementedError
+
+    def metrics(self) -> dict[str, float]:
+        """Returns iteration, evaluations, best_loss, mean_loss, coverage, qd_score, ...."""
+        return {
+            "iteration": float(self._iteration),
+            "evaluations": float(self._evaluations),
+            **self._summary(),
+        }
+
+    def best(self) -> tuple[np.ndarray, float]:
+        """Returns the kept genome (56,) with the lowest single-objective loss, and that loss."""
+        kept = self._kept()
+        if kept is None:
+            raise RuntimeError("nothing kept yet: tell() the first batch")
+        loss = self._scalar(kept)
+        i = int(np.argmin(loss))
+        return kept.genome[i].copy(), float(loss[i])
+
+    def view(self) -> dict[str, np.ndarray]:
+        """Returns the kept individuals as columns.
+
+        Columns: cell (int64, -1 outside an archive), loss (single-objective), loss_0 and
+        loss_1 (NSGA-II), error, angle_error, desc_0..desc_{D-1}, bin_0.. (archives only),
+        genome (N, 56), sigma (N, S), foot_x and foot_y (N, A), plus approach extras.
+        """
+        kept = self._kept()
+        if kept is None:
+            return {}
+        columns: dict[str, np.ndarray] = {"cell": np.full(len(kept), -1, dtype=np.int64)}
+        columns["loss"] = self._scalar(kept)
+        if kept.loss.ndim == 2:
+            columns["loss_0"] = kept.loss[:, 0]
+            columns["loss_1"] = kept.loss[:, 1]
+        columns["error"] = kept.error
+        columns["angle_error"] = kept.angle_error
+        for d in range(kept.desc.shape[1]):
+            columns[f"desc_{d}"] = kept.desc[:, d]
+        columns |= self._columns()
+        columns |= {
+            "genome": kept.genome,
+            "sigma": kept.sigma,
+            "foot_x": kept.foot_x,
+            "foot_y": kept.foot_y,
+        }
+        return columns
+
+    def settings(self) -> dict[str, object]:
+        """Returns the JSON-able settings that define this optimizer."""
+        return {
+            "approach": self.approach,
+            "fitness": self.fitness,
+            "eval_fitness": self.eval_fitness,
+            "batch_size": self.batch_size,
+            "mode": self.mode,
+            "seed": self.seed,
+            "n_angles": self.n_angles,
+            "initial_sigma": self.initial_sigma,
+            "qd_offset": self.qd_offset,
+        }
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Returns the whole search state as npz-safe arrays (between iterations only)."""
+        if self._pending is not None:
+            raise RuntimeError("state_dict() between ask() and tell(); tell the batch first")
+        return {
+            "optimizer.settings": np.array(json.dumps(self.settings(), sort_keys=True)),
+            "optimizer.rng": encode_rng(self._rng),
+            "optimizer.evaluations": np.array(self._evaluations, dtype=np.int64),
+            "optimizer.iteration": np.array(self._iteration, dtype=np.int64),
+            **self._state(),
+        }
+
+    def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
+        """Restores `state_dict`'s output; the settings must match this optimizer's."""
+        saved = json.loads(str(np.asarray(state["optimizer.settings"])[()]))
+        mine = json.loads(json.dumps(self.settings(), sort_keys=True))
+        if saved != mine:
+            diff = sorted(k for k in set(saved) | set(mine) if saved.get(k) != mine.get(k))
+            raise ValueError(
+                "state was saved by a different optimizer; differing settings: "
+                + ", ".join(f"{k} (saved {saved.get(k)!r}, here {mine.get(k)!r})" for k in diff)
+            )
+        self._rng = decode_rng(state["optimizer.rng"])
+        self._evaluations = int(state["optimizer.evaluations"])
+        self._iteration = int(state["optimizer.iteration"])
+        self._pending = None
+        self._load_state(state)
+
+    def _scalar(self, kept: Individuals) -> np.ndarray:
+        return scalar_loss(kept.loss, kept.error, kept.angle_error, self.fitness)
+
+    def _parents(self) -> tuple[np.ndarray, np.ndarray]:
+        """Returns the parents' genomes (B, 56) and mutation strengths (B, S)."""
+        raise NotImplementedError
+
+    def _survive(self, batch: Individuals, *, initial: bool) -> None:
+        raise NotImplementedError
+
+    def _kept(self) -> Individuals | None:
+        raise NotImplementedError
+
+    def _summary(self) -> dict[str, float]:
+        raise NotImplementedError
+
+    def _columns(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def _state(self) -> dict[str, np.ndarray]:
+        raise NotImplementedError
+
+    def _load_state(self, state: dict[str, np.ndarray]) -> None:
+        raise NotImplementedError

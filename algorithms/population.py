@@ -1,0 +1,74 @@
+"""Provides PopulationOptimizer: the shared base of the fixed-size population searches."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from algorithms.archive import elite_rows
+from algorithms.individuals import Individuals
+from algorithms.optimizer import BaseOptimizer
+from sim.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
+from sim.evaluation import Evaluation
+
+
+class PopulationOptimizer(BaseOptimizer):
+    """A search that keeps a population of B individuals (the EA and NSGA-II).
+
+    Coverage and QD-score are measured by projecting the population onto a MAP-Elites grid
+    (`coverage_space`, MAP-LIS by default): the filled fraction of its cells and the sum
+    over filled cells of max(offset - best loss in the cell, 0), as an archive of the
+    population would score.
+
+    Args:
+        coverage_space: the approach whose grid measures coverage ("MAP-WH", "MAP-LIS",
+            "MAP-ST").
+        **kwargs: as `BaseOptimizer`.
+    """
+
+    def __init__(self, *, coverage_space: str = "MAP-LIS", **kwargs: object) -> None:
+        super().__init__(**kwargs)  # type: ignore[arg-type]
+        allowed = ("MAP-WH", "MAP-LIS", "MAP-ST")
+        if coverage_space not in allowed:
+            raise ValueError(
+                f"unknown coverage_space {coverage_space!r}; allowed: {', '.join(allowed)}"
+            )
+        self.coverage_space = coverage_space
+        self._population: Individuals | None = None
+
+    @property
+    def population(self) -> Individuals | None:
+        """The current population (B rows), or None before the first tell."""
+        return self._population
+
+    def descriptors_of(self, genomes: np.ndarray, evaluation: Evaluation) -> np.ndarray:
+        """Returns the coverage space's continuous descriptors (B, D) from the evaluation."""
+        return evaluation.descriptors[self.coverage_space]
+
+    def settings(self) -> dict[str, object]:
+        """Returns the JSON-able settings, with the coverage space."""
+        return super().settings() | {"coverage_space": self.coverage_space}
+
+    def _kept(self) -> Individuals | None:
+        return self._population
+
+    def _summary(self) -> dict[str, float]:
+        pop = self._population
+        if pop is None:
+            return {"best_loss": np.nan, "mean_loss": np.nan, "coverage": 0.0, "qd_score": 0.0}
+        loss = self._scalar(pop)
+        space = DESCRIPTOR_SPACES[self.coverage_space]
+        cells = cell_index(bin_descriptors(pop.desc, space), space)
+        best = loss[elite_rows(cells, loss)]
+        return {
+            "best_loss": float(np.min(loss)),
+            "mean_loss": float(np.mean(loss)),
+            "coverage": best.size / space.n_cells,
+            "qd_score": float(np.sum(np.maximum(self.qd_offset - best, 0.0))),
+        }
+
+    def _state(self) -> dict[str, np.ndarray]:
+        return {} if self._population is None else self._population.to_state("population")
+
+    def _load_state(self, state: dict[str, np.ndarray]) -> None:
+        has = "population.genome" in state
+        self._population = Individuals.from_state(state, "population") if has else None

@@ -1,0 +1,224 @@
+"""The one trial loop: artefacts, reproducibility, checkpoint and exact resume, spec checks."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from sim.linkage_doc import from_document
+from workers.artifacts import read_npz
+from workers.evaluators import LocalEvaluator
+from workers.recorders import NullRecorder
+from workers.trial import TrialSpec, TrialSpecError, run_trial
+
+BATCH = 100
+
+
+class ListRecorder:
+    """Keeps what the loop reports, to assert on it."""
+
+    def __init__(self) -> None:
+        self.iterations: list[tuple[int, dict[str, float]]] = []
+        self.artifacts: list[Path] = []
+
+    def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
+        self.iterations.append((iteration, dict(metrics)))
+
+    def log_artifacts(self, out_dir: Path) -> None:
+        self.artifacts.append(out_dir)
+
+
+class FailingEvaluator:
+    """Evaluates normally, then raises on call number `fail_at` (a crash mid-trial)."""
+
+    def __init__(self, inner: LocalEvaluator, fail_at: int) -> None:
+        self.inner = inner
+        self.calls = 0
+        self.fail_at = fail_at
+
+    def __call__(self, genomes: np.ndarray):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise RuntimeError("evaluator crashed")
+        return self.inner(genomes)
+
+
+def spec_for(approach: str, **changes) -> TrialSpec:
+    values = {
+        "approach": approach,
+        "fitness": "Fp",
+        "evaluations": 6 * BATCH,
+        "batch_size": BATCH,
+        "seed": 7,
+        "n_angles": 12,
+        "checkpoint_every": 2,
+    }
+    return TrialSpec(**(values | changes))
+
+
+def evaluator_for(spec: TrialSpec) -> LocalEvaluator:
+    return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
+
+
+def read_rows(path: Path) -> list[list[str]]:
+    with open(path, newline="") as f:
+        return list(csv.reader(f))
+
+
+@pytest.mark.parametrize("approach", ["MAP-LIS", "NSGA2"])
+def test_trial_writes_every_artefact(approach: str, tmp_path: Path) -> None:
+    spec = spec_for(approach)
+    recorder = ListRecorder()
+    result = run_trial(spec, evaluator_for(spec), recorder, tmp_path)
+    assert result.iterations == 6 and result.evaluations == 6 * BATCH
+    rows = read_rows(tmp_path / "metrics.csv")
+    header = rows[0]
+    assert header[:6] == [
+        "iteration", "evaluations", "best_loss", "mean_loss", "coverage", "qd_score"
+    ]  # fmt: skip
+    assert ("hypervolume" in header) == (approach == "NSGA2")
+    assert [float(r[1]) for r in rows[1:]] == [BATCH * i for i in range(1, 7)]
+    best = [float(r[2]) for r in rows[1:]]
+    if approach == "MAP-LIS":  # an archive never loses its best
+        assert all(b <= a for a, b in itertools.pairwise(best))
+    assert [i for i, _ in recorder.iterations] == list(range(1, 7))
+    assert recorder.artifacts == [tmp_path]
+
+    name = "repertoire.parquet" if approach == "MAP-LIS" else "population.parquet"
+    table = pq.read_table(tmp_path / name)
+    genome_type = table.schema.field("genome").type
+    assert pa.types.is_list(genome_type) and pa.types.is_float64(genome_type.value_type)
+    frame = table.to_pandas()
+    expected_rows = round(float(rows[-1][4]) * 10_000) if approach == "MAP-LIS" else BATCH
+    assert len(frame) == expected_rows
+    assert np.stack(frame["genome"]).shape == (len(frame), 56)
+    assert np.stack(frame["foot_x"]).shape == (len(frame), 12)
+    if approach == "MAP-LIS":
+        assert (frame["cell"] >= 0).all() and frame["cell"].is_unique
+        assert {"bin_0", "bin_1"} <= set(frame.columns)
+    else:
+        assert (frame["cell"] == -1).all()
+        assert {"loss_0", "loss_1", "front"} <= set(frame.columns)
+    assert frame["loss"].min() == pytest.approx(result.best_loss)
+
+    doc = json.loads((tmp_path / "best_linkage.json").read_text())
+    genome, mode = from_document(doc)
+    assert mode == "paper"
+    best_row = frame.loc[frame["loss"].idxmin()]
+    np.testing.assert_allclose(genome, np.asarray(best_row["genome"]), atol=1e-12)
+    assert (tmp_path / "best_linkage.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    settings = json.loads((tmp_path / "settings.json").read_text())
+    assert settings["spec"]["approach"] == approach
+    assert settings["optimizer"]["eval_fitness"] == spec.eval_fitness
+    assert "numpy" in settings["versions"]
+    state = read_npz(tmp_path / "checkpoint" / "state.npz")  # loads without pickle
+    assert int(state["checkpoint.rows"]) == 6
+
+
+def test_same_seed_same_metrics_other_seed_differs(tmp_path: Path) -> None:
+    spec = spec_for("EA", evaluations=4 * BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "a")
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "b")
+    other = spec_for("EA", evaluations=4 * BATCH, seed=8)
+    run_trial(other, evaluator_for(other), NullRecorder(), tmp_path / "c")
+    a, b, c = (read_rows(tmp_path / d / "metrics.csv") for d in "abc")
+    assert a == b
+    assert a[0] == c[0] and a[1:] != c[1:]
+
+
+@pytest.mark.parametrize("approach", ["EA", "NSGA2", "MAP-ST"])
+def test_resume_continues_exactly_as_an_uninterrupted_run(approach: str, tmp_path: Path) -> None:
+    spec = spec_for(approach, evaluations=7 * BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "whole")
+
+    crashing = FailingEvaluator(evaluator_for(spec), fail_at=6)
+    with pytest.raises(RuntimeError, match="evaluator crashed"):
+        run_trial(spec, crashing, NullRecorder(), tmp_path / "cut")
+    assert len(read_rows(tmp_path / "cut" / "metrics.csv")) == 1 + 5  # rows beyond the checkpoint
+
+    recorder = ListRecorder()
+    result = run_trial(spec, evaluator_for(spec), recorder, tmp_path / "cut", resume=True)
+    whole = read_rows(tmp_path / "whole" / "metrics.csv")
+    assert read_rows(tmp_path / "cut" / "metrics.csv") == whole
+    assert [i for i, _ in recorder.iterations] == list(range(1, 8))  # 1..4 replayed
+    assert [m["best_loss"] for _, m in recorder.iterations] == [float(r[2]) for r in whole[1:]]
+    assert result.iterations == 7
+    one = pd.read_parquet(next((tmp_path / "whole").glob("*.parquet")))
+    two = pd.read_parquet(next((tmp_path / "cut").glob("*.parquet")))
+    np.testing.assert_array_equal(np.stack(one["genome"]), np.stack(two["genome"]))
+
+
+def test_resume_refuses_a_checkpoint_of_another_trial(tmp_path: Path) -> None:
+    spec = spec_for("EA", evaluations=2 * BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
+    other = spec_for("EA", evaluations=2 * BATCH, seed=99)
+    with pytest.raises(ValueError, match=r"another trial; differing: seed \(saved 7, now 99\)"):
+        run_trial(other, evaluator_for(other), NullRecorder(), tmp_path, resume=True)
+
+
+def test_resume_with_a_larger_budget_extends_the_trial(tmp_path: Path) -> None:
+    short = spec_for("MAP-WH", evaluations=3 * BATCH)
+    run_trial(short, evaluator_for(short), NullRecorder(), tmp_path / "ext")
+    longer = spec_for("MAP-WH", evaluations=5 * BATCH)
+    result = run_trial(longer, evaluator_for(longer), NullRecorder(), tmp_path / "ext", resume=True)
+    run_trial(longer, evaluator_for(longer), NullRecorder(), tmp_path / "whole")
+    assert result.iterations == 5
+    assert read_rows(tmp_path / "ext" / "metrics.csv") == read_rows(
+        tmp_path / "whole" / "metrics.csv"
+    )
+
+
+def test_wall_clock_limit_stops_after_an_iteration(tmp_path: Path) -> None:
+    spec = spec_for("EA", max_seconds=1e-9)
+    result = run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
+    assert result.stopped_by == "max_seconds" and result.iterations == 1
+    assert json.loads((tmp_path / "result.json").read_text())["stopped_by"] == "max_seconds"
+
+
+def test_budget_counts_whole_batches(tmp_path: Path) -> None:
+    spec = spec_for("MAP-LIS", evaluations=3 * BATCH + BATCH // 2)
+    result = run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
+    assert result.evaluations == 3 * BATCH and spec.iterations == 3
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"approach": "GA"}, "unknown approach 'GA'; allowed: EA, NSGA2, MAP-WH"),
+        ({"fitness": "Fp2"}, "unknown fitness 'Fp2'; allowed: Fp, Fsl"),
+        ({"evaluations": -5}, r"evaluations must be an integer >= the batch size \(100\), got -5"),
+        ({"evaluations": 50}, r"evaluations must be an integer >= the batch size \(100\), got 50"),
+        ({"batch_size": 0}, "batch size must be a positive integer, got 0"),
+        ({"mode": "fast"}, "unknown mode 'fast'; allowed: paper, legacy"),
+        ({"seed": -1}, "seed must be a non-negative integer, got -1"),
+        ({"target": "nowhere.json"}, "target 'nowhere.json' is neither a published target"),
+        ({"checkpoint_every": 0}, "checkpoint_every must be a positive integer, got 0"),
+        ({"max_seconds": -1.0}, "max_seconds must be a positive number or None, got -1.0"),
+    ],
+)
+def test_bad_spec_is_refused_with_a_clear_message(changes: dict, message: str) -> None:
+    with pytest.raises(TrialSpecError, match=message):
+        spec_for(**({"approach": "EA"} | changes))
+
+
+def test_spec_knows_the_evaluator_fitness() -> None:
+    assert spec_for("NSGA2").eval_fitness == "Fp2"
+    assert spec_for("NSGA2", fitness="Fsl").eval_fitness == "Fsl2"
+    assert spec_for("MAP-LIS").eval_fitness == "Fp"
+
+
+def test_user_target_file(tmp_path: Path) -> None:
+    target = tmp_path / "flat.json"
+    target.write_text(json.dumps({"step": [[-4, -1], [0, -1], [4, -1]], "lift": [[0, 2]]}))
+    spec = spec_for("EA", target=str(target), evaluations=BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "out")
+    settings = json.loads((tmp_path / "out" / "settings.json").read_text())
+    assert settings["target"]["step"] == [[-4.0, -1.0], [0.0, -1.0], [4.0, -1.0]]

@@ -1,0 +1,70 @@
+"""Provides the in-process evaluator and the resolution of a trial's target."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from sim.evaluate import evaluate
+from sim.evaluation import Evaluation
+from sim.fitness import NAMED_TARGETS, Target, named_target
+
+
+class Evaluator(Protocol):
+    """Evaluates a batch of genomes for a trial."""
+
+    def __call__(self, genomes: np.ndarray) -> Evaluation:
+        """Returns the evaluation of genomes (B, 56), rows in input order."""
+        ...
+
+
+def resolve_target(target: str) -> Target:
+    """Returns the F_p target named `target` ("D16", "D24") or stored in a JSON file.
+
+    Raises:
+        ValueError: naming the value when it is neither a published name nor a readable
+            JSON target file.
+    """
+    if target in NAMED_TARGETS:
+        return named_target(target)
+    path = Path(target)
+    if not path.is_file():
+        raise ValueError(
+            f"target {target!r} is neither a published target ({', '.join(NAMED_TARGETS)}) "
+            "nor an existing JSON file"
+        )
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"target file {target!r} is not readable JSON: {exc}") from exc
+    return Target.from_dict(doc, name=path.stem)
+
+
+class LocalEvaluator:
+    """Evaluates in this process with `sim.evaluate` (numba threads over the batch).
+
+    Args:
+        fitness: the `sim.evaluate` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
+        mode: "paper" or "legacy".
+        target: a published target name or a JSON target file.
+        n_angles: crank angles per turn.
+    """
+
+    def __init__(self, fitness: str, mode: str, target: str = "D16", n_angles: int = 40) -> None:
+        self.fitness = fitness
+        self.mode = mode
+        self.target = resolve_target(target)
+        self.n_angles = n_angles
+
+    def __call__(self, genomes: np.ndarray) -> Evaluation:
+        """Returns the evaluation of genomes (B, 56)."""
+        return evaluate(
+            genomes,
+            fitness=self.fitness,
+            mode=self.mode,
+            target=self.target,
+            n_angles=self.n_angles,
+        )

@@ -1,0 +1,325 @@
+"""Provides the one trial loop (ask -> evaluate -> tell -> record) and its spec and result."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import json
+import platform
+import shutil
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from algorithms import APPROACHES, Optimizer, eval_fitness, make_optimizer
+from sim.evaluation import MODES
+from sim.linkage_doc import to_document
+from workers.artifacts import write_json_atomic, write_parquet_atomic
+from workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from workers.drawing import draw_linkage
+from workers.evaluators import Evaluator, resolve_target
+from workers.recorders import MetricsCsv, Recorder
+
+TRIAL_FITNESSES: tuple[str, ...] = ("Fp", "Fsl")
+"""The fitness functions a trial optimises."""
+CHECKPOINT_DIR = "checkpoint"
+METRICS_FILE = "metrics.csv"
+SETTINGS_FILE = "settings.json"
+RESULT_FILE = "result.json"
+BEST_JSON = "best_linkage.json"
+BEST_PNG = "best_linkage.png"
+
+
+class TrialSpecError(ValueError):
+    """A trial setting that is not allowed; the message names the value and the choices."""
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """One trial: which search, on which loss, for how many evaluations.
+
+    Attributes:
+        approach: "EA", "NSGA2", "MAP-WH", "MAP-LIS", "MAP-ST" or "MAP-AU".
+        fitness: "Fp" or "Fsl" (NSGA-II evaluates the two-objective variant).
+        evaluations: the budget; the trial runs whole batches while they fit in it (the
+            initial population counts), so it must be >= batch_size.
+        batch_size: children per iteration and initial population size.
+        mode: "paper" or "legacy".
+        seed: seed of the optimizer (>= 0).
+        target: F_p target: "D16", "D24" or a JSON target file.
+        n_angles: crank angles per turn (>= 2).
+        checkpoint_every: iterations between checkpoints (>= 1).
+        max_seconds: optional wall-clock limit of one `run_trial` call, checked after each
+            iteration (so at least one runs).
+        options: approach-specific settings passed to `algorithms.make_optimizer`.
+
+    Raises:
+        TrialSpecError: on construction, for any value outside the allowed ones.
+    """
+
+    approach: str
+    fitness: str
+    evaluations: int
+    batch_size: int = 5000
+    mode: str = "paper"
+    seed: int = 0
+    target: str = "D16"
+    n_angles: int = 40
+    checkpoint_every: int = 10
+    max_seconds: float | None = None
+    options: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        def fail(message: str) -> None:
+            raise TrialSpecError(message)
+
+        if self.approach not in APPROACHES:
+            fail(f"unknown approach {self.approach!r}; allowed: {', '.join(APPROACHES)}")
+        if self.fitness not in TRIAL_FITNESSES:
+            fail(f"unknown fitness {self.fitness!r}; allowed: {', '.join(TRIAL_FITNESSES)}")
+        if self.mode not in MODES:
+            fail(f"unknown mode {self.mode!r}; allowed: {', '.join(MODES)}")
+        if not _is_int(self.batch_size) or self.batch_size < 1:
+            fail(f"batch size must be a positive integer, got {self.batch_size!r}")
+        if not _is_int(self.evaluations) or self.evaluations < self.batch_size:
+            fail(
+                f"evaluations must be an integer >= the batch size ({self.batch_size}), "
+                f"got {self.evaluations!r}"
+            )
+        if not _is_int(self.seed) or self.seed < 0:
+            fail(f"seed must be a non-negative integer, got {self.seed!r}")
+        if not _is_int(self.n_angles) or self.n_angles < 2:
+            fail(f"n_angles must be an integer >= 2, got {self.n_angles!r}")
+        if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
+            fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
+        if self.max_seconds is not None and not (
+            isinstance(self.max_seconds, int | float) and self.max_seconds > 0
+        ):
+            fail(f"max_seconds must be a positive number or None, got {self.max_seconds!r}")
+        if not isinstance(self.options, dict):
+            fail(f"options must be a dict, got {self.options!r}")
+        try:
+            json.dumps(self.options)
+        except TypeError as exc:
+            fail(f"options must be JSON-able ({exc}), got {self.options!r}")
+        try:
+            resolve_target(self.target)
+        except ValueError as exc:
+            fail(str(exc))
+
+    @property
+    def eval_fitness(self) -> str:
+        """The `sim.evaluate` fitness the evaluator must use ("Fp2"/"Fsl2" for NSGA2)."""
+        return eval_fitness(self.approach, self.fitness)
+
+    @property
+    def iterations(self) -> int:
+        """Iterations the budget allows (the initial population is the first)."""
+        return self.evaluations // self.batch_size
+
+    def to_dict(self) -> dict[str, object]:
+        """Returns the JSON-able fields."""
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    """How a trial ended.
+
+    Attributes:
+        spec: the trial.
+        out_dir: where its files are.
+        iterations: completed iterations (the initial population is the first).
+        evaluations: evaluations done.
+        best_loss: the lowest single-objective loss kept at the end.
+        metrics: the last iteration's metrics.
+        seconds: wall time of this call (a resumed trial counts only its own part).
+        timings: seconds spent per phase in this call: ask (parent selection and
+            mutation), evaluate, tell (survivor selection / archive insertion), record
+            (metrics, files, recorder), checkpoint, final (end-of-trial artefacts).
+        stopped_by: "budget" or "max_seconds".
+    """
+
+    spec: TrialSpec
+    out_dir: Path
+    iterations: int
+    evaluations: int
+    best_loss: float
+    metrics: dict[str, float]
+    seconds: float
+    timings: dict[str, float] = field(default_factory=dict)
+    stopped_by: str = "budget"
+
+
+def build_optimizer(spec: TrialSpec) -> Optimizer:
+    """Returns the fresh optimizer a spec describes (raises ValueError for bad options)."""
+    return make_optimizer(
+        spec.approach,
+        fitness=spec.fitness,
+        batch_size=spec.batch_size,
+        mode=spec.mode,
+        seed=spec.seed,
+        n_angles=spec.n_angles,
+        **spec.options,
+    )
+
+
+def versions() -> dict[str, str]:
+    """Returns the versions that shape a trial's numbers."""
+    found = {"python": platform.python_version()}
+    for package in ("linkevo", "numpy", "numba", "scipy"):
+        try:
+            found[package] = importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            found[package] = "unknown"
+    return found
+
+
+def _spec_doc(spec: TrialSpec) -> dict[str, object]:
+    return json.loads(json.dumps(spec.to_dict()))
+
+
+def _resume(
+    spec: TrialSpec, optimizer: Optimizer, log: MetricsCsv, recorder: Recorder, folder: Path
+) -> bool:
+    checkpoint = load_checkpoint(folder)
+    if checkpoint is None:
+        return False
+    saved = dict(checkpoint.spec)
+    mine = _spec_doc(spec)
+    # The budget and wall-clock limit may grow on resume; everything else must match.
+    for key in ("evaluations", "max_seconds", "checkpoint_every"):
+        saved.pop(key, None)
+        mine.pop(key, None)
+    if saved != mine:
+        diff = sorted(k for k in set(saved) | set(mine) if saved.get(k) != mine.get(k))
+        raise ValueError(
+            f"the checkpoint in {folder} belongs to another trial; differing: "
+            + ", ".join(f"{k} (saved {saved.get(k)!r}, now {mine.get(k)!r})" for k in diff)
+        )
+    optimizer.load_state_dict(checkpoint.state)
+    for row in log.truncate(checkpoint.rows):
+        recorder.log_iteration(int(row["iteration"]), row)
+    return True
+
+
+def _checkpoint(spec: TrialSpec, optimizer: Optimizer, rows: int, folder: Path) -> None:
+    save_checkpoint(folder, Checkpoint(optimizer.state_dict(), rows, _spec_doc(spec)))
+
+
+def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
+    name = "repertoire.parquet" if spec.approach.startswith("MAP-") else "population.parquet"
+    write_parquet_atomic(out_dir / name, optimizer.view())
+    genome, loss = optimizer.best()
+    write_json_atomic(out_dir / BEST_JSON, to_document(genome, spec.mode))
+    draw_linkage(genome, spec.mode, out_dir / BEST_PNG)
+    return loss
+
+
+def run_trial(
+    spec: TrialSpec,
+    evaluator: Evaluator,
+    recorder: Recorder,
+    out_dir: Path,
+    resume: bool = False,
+) -> TrialResult:
+    """Runs one trial: ask -> evaluate -> tell -> record, until the budget is spent.
+
+    Writes into `out_dir`: `settings.json` (at the start), `metrics.csv` (one flushed row
+    per iteration), `checkpoint/state.npz` (every `checkpoint_every` iterations and at
+    the end, atomically), then `repertoire.parquet` (MAP-*) or `population.parquet`
+    (EA, NSGA2), `best_linkage.json`, `best_linkage.png` and `result.json`; finally it
+    calls `recorder.log_artifacts(out_dir)`.
+
+    With `resume`, the checkpoint (if any) is loaded, metrics.csv is cut back to the rows
+    it had then, those rows are replayed to `recorder.log_iteration`, and the loop goes on;
+    the metrics equal those of an uninterrupted run. Without it (or with no checkpoint) the
+    trial starts afresh, replacing earlier files.
+
+    Args:
+        spec: the trial.
+        evaluator: `evaluator(genomes (B, 56)) -> Evaluation` with fitness
+            `spec.eval_fitness`, mode `spec.mode`, target `spec.target`, `spec.n_angles`.
+        recorder: receives every iteration's metrics and the final files.
+        out_dir: the trial's folder (created if missing).
+        resume: continue from `out_dir/checkpoint` when it exists.
+    """
+    start = time.monotonic()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    optimizer = build_optimizer(spec)
+    log = MetricsCsv(out_dir / METRICS_FILE)
+    folder = out_dir / CHECKPOINT_DIR
+    if not (resume and _resume(spec, optimizer, log, recorder, folder)):
+        log.reset()
+        shutil.rmtree(folder, ignore_errors=True)
+    write_json_atomic(
+        out_dir / SETTINGS_FILE,
+        {
+            "spec": _spec_doc(spec),
+            "optimizer": optimizer.settings(),
+            "target": resolve_target(spec.target).to_dict(),
+            "iterations": spec.iterations,
+            "versions": versions(),
+        },
+    )
+    timings = dict.fromkeys(("ask", "evaluate", "tell", "record", "checkpoint", "final"), 0.0)
+    stopped_by = "budget"
+    clock = time.perf_counter()
+
+    def lap(phase: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[phase] += now - clock
+        clock = now
+
+    while optimizer.evaluations + spec.batch_size <= spec.evaluations:
+        genomes = optimizer.ask()
+        lap("ask")
+        evaluation = evaluator(genomes)
+        lap("evaluate")
+        optimizer.tell(genomes, evaluation)
+        lap("tell")
+        metrics = optimizer.metrics()
+        log.append(metrics)
+        recorder.log_iteration(optimizer.iteration, metrics)
+        lap("record")
+        if optimizer.iteration % spec.checkpoint_every == 0:
+            _checkpoint(spec, optimizer, optimizer.iteration, folder)
+            lap("checkpoint")
+        if spec.max_seconds is not None and time.monotonic() - start >= spec.max_seconds:
+            stopped_by = "max_seconds"
+            break
+    _checkpoint(spec, optimizer, optimizer.iteration, folder)
+    best_loss = _write_final(spec, optimizer, out_dir)
+    metrics = optimizer.metrics()
+    result = TrialResult(
+        spec=spec,
+        out_dir=out_dir,
+        iterations=optimizer.iteration,
+        evaluations=optimizer.evaluations,
+        best_loss=best_loss,
+        metrics=metrics,
+        seconds=time.monotonic() - start,
+        timings=timings,
+        stopped_by=stopped_by,
+    )
+    write_json_atomic(
+        out_dir / RESULT_FILE,
+        {
+            "iterations": result.iterations,
+            "evaluations": result.evaluations,
+            "best_loss": best_loss,
+            "metrics": metrics,
+            "stopped_by": stopped_by,
+            "seconds": result.seconds,
+        },
+    )
+    lap("final")
+    recorder.log_artifacts(out_dir)
+    return result
