@@ -17,7 +17,7 @@ def evaluate(
     genomes: np.ndarray,
     fitness: str = "Fp",
     mode: str = "paper",
-    target: Target | None = None,
+    target: Target | str | None = None,
     n_angles: int = DEFAULT_ANGLES,
 ) -> Evaluation:
     """Returns the Evaluation of genomes (N, 56): losses, errors, foot paths, descriptors.
@@ -26,7 +26,7 @@ def evaluate(
         genomes: (N, 56) genes in [0, 1).
         fitness: "Fp", "Fsl" (loss (N,)) or "Fp2", "Fsl2" (loss (N, 2)).
         mode: "paper" (default) or "legacy".
-        target: F_p target points; None means the published "D16".
+        target: F_p target points, or a published name ("D16", "D24"); None is "D16".
         n_angles: crank angles per turn, A.
 
     Raises:
@@ -37,7 +37,10 @@ def evaluate(
     check_fitness(fitness)
     n_angles = check_angles(n_angles)
     genomes = validate_genomes(genomes)
-    target = target or named_target("D16")
+    if target is None or isinstance(target, str):
+        target = named_target(target or "D16")
+    elif not isinstance(target, Target):
+        raise ValueError(f"target must be a Target or a published name, got {target!r}")
     n = genomes.shape[0]
     n_obj = N_OBJECTIVES[fitness]
     loss = np.empty((n, n_obj))

@@ -303,7 +303,11 @@ def up_by_sign(foot, k, ni, bi, b, xs, ys, theta):
         if dya > 1e-9 * abs(dxa) and dyc > 1e-9 * abs(dxc):
             return 1
         if (dya > 0.0 and dyc < 0.0) or (dya < 0.0 and dyc > 0.0):
-            return 1 if dxa * dyc + dxc * dya > 0.0 else 0
+            # Within rounding of zero the angles themselves must decide: two atan2 values
+            # can cancel exactly where the cross product is a few ulps off.
+            cross = dxa * dyc + dxc * dya
+            if abs(cross) > 1e-9 * (abs(dxa * dyc) + abs(dxc * dya)):
+                return 1 if cross > 0.0 else 0
         return -1
     # One beam: its angle is its root's plus m times pi, the root's lying in [-pi, pi]
     # (a triangle beam) or [0, 2 pi) (the crank); with m >= 2 it is at least pi.

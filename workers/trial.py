@@ -15,7 +15,7 @@ import numpy as np
 from algorithms import APPROACHES, Optimizer, eval_fitness, make_optimizer
 from sim.evaluation import MODES
 from sim.linkage_doc import to_document
-from workers.artifacts import write_json_atomic, write_parquet_atomic
+from workers.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
 from workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from workers.drawing import draw_linkage
 from workers.evaluators import Evaluator, resolve_target
@@ -29,6 +29,7 @@ SETTINGS_FILE = "settings.json"
 RESULT_FILE = "result.json"
 BEST_JSON = "best_linkage.json"
 BEST_PNG = "best_linkage.png"
+ENCODER_PT = "encoder.pt"
 
 
 class TrialSpecError(ValueError):
@@ -210,6 +211,22 @@ def _resume(
 
 def _checkpoint(spec: TrialSpec, optimizer: Optimizer, rows: int, folder: Path) -> None:
     save_checkpoint(folder, Checkpoint(optimizer.state_dict(), rows, _spec_doc(spec)))
+    _write_torch_state(optimizer, folder / ENCODER_PT)
+
+
+def _write_torch_state(optimizer: Optimizer, path: Path) -> None:
+    """Saves an optimizer's torch state dict (MAP-AU's encoder), if it has one.
+
+    The npz checkpoint already holds the same weights for resuming; this file is the
+    encoder in torch's own format, loadable with `torch.load(path, weights_only=True)`.
+    """
+    torch_state = getattr(optimizer, "torch_state", None)
+    if torch_state is None:
+        return
+    import torch
+
+    with atomic_path(path) as tmp:
+        torch.save(torch_state(), tmp)
 
 
 def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
@@ -218,6 +235,7 @@ def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
     genome, loss = optimizer.best()
     write_json_atomic(out_dir / BEST_JSON, to_document(genome, spec.mode))
     draw_linkage(genome, spec.mode, out_dir / BEST_PNG)
+    _write_torch_state(optimizer, out_dir / ENCODER_PT)
     return loss
 
 
@@ -233,7 +251,8 @@ def run_trial(
     Writes into `out_dir`: `settings.json` (at the start), `metrics.csv` (one flushed row
     per iteration), `checkpoint/state.npz` (every `checkpoint_every` iterations and at
     the end, atomically), then `repertoire.parquet` (MAP-*) or `population.parquet`
-    (EA, NSGA2), `best_linkage.json`, `best_linkage.png` and `result.json`; finally it
+    (EA, NSGA2), `best_linkage.json`, `best_linkage.png`, `encoder.pt` (MAP-AU) and
+    `result.json`; finally it
     calls `recorder.log_artifacts(out_dir)`.
 
     With `resume`, the checkpoint (if any) is loaded, metrics.csv is cut back to the rows

@@ -1,0 +1,143 @@
+"""Times one MAP-AU trial at the study's budget, split into training and evaluation.
+
+Runs the trial loop's ask -> evaluate -> tell cycle in-process (no recording) while a
+whole batch fits in the evaluation budget (as `workers.trial.run_trial` does), then
+measures the fused training loop against the plain torch.nn + autograd + torch.optim
+loop (`algorithms.aurora_reference`) on the trial's last training set: same paths, batch
+size, learning rate and batch order.
+
+    .venv/bin/python benchmarks/aurora_trial.py                      # the paper's schedule
+    .venv/bin/python benchmarks/aurora_trial.py --initial-epochs 300 --retrain-epochs 100
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import fields
+
+import numpy as np
+import torch
+
+from algorithms.aurora import AuroraMapElites, AuroraSettings
+from algorithms.aurora_model import PathAutoencoder
+from algorithms.aurora_paths import valid_rows
+from algorithms.aurora_reference import reference_module, train_reference
+from sim import evaluate, random_genomes
+
+STUDY_EVALUATIONS = 726_750
+"""One hour on 16 CPUs in the study (spec §6)."""
+
+
+def parse_args() -> argparse.Namespace:
+    """Returns the command line: budget, seed, and any `AuroraSettings` field."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--evaluations", type=int, default=STUDY_EVALUATIONS)
+    parser.add_argument("--batch-size", type=int, default=5000)
+    parser.add_argument("--fitness", default="Fp")
+    parser.add_argument("--mode", default="paper")
+    parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--compare-epochs", type=int, default=3, help="epochs timed per loop")
+    parser.add_argument("--json", help="also write the summary to this file")
+    for f in fields(AuroraSettings):
+        parser.add_argument(f"--{f.name.replace('_', '-')}", type=type(f.default), default=None)
+    return parser.parse_args()
+
+
+def compare_loops(
+    paths: np.ndarray, settings: AuroraSettings, epochs: int, seed: int
+) -> dict[str, float]:
+    """Returns seconds per epoch of the fused and the plain loop on `paths` (N, 80).
+
+    Each loop first runs one untimed epoch (torch's first-call set-up).
+    """
+    fused = PathAutoencoder(
+        n_inputs=paths.shape[1], seed=seed, device="cpu", threads=settings.threads
+    )
+    plain = reference_module(fused.state_dict())
+    common = {"batch_size": settings.ae_batch_size, "learning_rate": settings.learning_rate}
+    fused.train(paths, epochs=1, seed=seed, **common)
+    train_reference(plain, paths, epochs=1, seed=seed, threads=settings.threads, **common)
+    started = time.perf_counter()
+    fused.train(paths, epochs=epochs, seed=seed, **common)
+    fused_s = (time.perf_counter() - started) / epochs
+    started = time.perf_counter()
+    train_reference(plain, paths, epochs=epochs, seed=seed, threads=settings.threads, **common)
+    plain_s = (time.perf_counter() - started) / epochs
+    return {"fused_epoch_s": fused_s, "plain_epoch_s": plain_s, "speedup": plain_s / fused_s}
+
+
+def main() -> None:
+    """Runs the trial and prints the split, the outcome and the loop comparison."""
+    args = parse_args()
+    options = {
+        f.name: getattr(args, f.name)
+        for f in fields(AuroraSettings)
+        if getattr(args, f.name) is not None
+    }
+    optimizer = AuroraMapElites(
+        fitness=args.fitness, batch_size=args.batch_size, mode=args.mode, seed=args.seed, **options
+    )
+    print("settings:", json.dumps(optimizer.settings()["aurora"]))
+    print(f"torch {torch.__version__}, device {optimizer.encoder.device}")
+    evaluate(random_genomes(np.random.default_rng(0), 8), args.fitness, args.mode)  # compiles
+    settings = optimizer.aurora
+    evaluate_s = 0.0
+    steps = 0
+    started = time.perf_counter()
+    while optimizer.evaluations + args.batch_size <= args.evaluations:  # as run_trial
+        genomes = optimizer.ask()
+        t0 = time.perf_counter()
+        evaluation = evaluate(genomes, args.fitness, args.mode)
+        evaluate_s += time.perf_counter() - t0
+        optimizer.tell(genomes, evaluation)
+        m = optimizer.metrics()
+        if m["train_paths"] > 0:
+            epochs = (
+                settings.initial_epochs if optimizer.trainings == 1 else settings.retrain_epochs
+            )
+            steps += epochs * -(-int(m["train_paths"]) // settings.ae_batch_size)
+            print(
+                f"iter {int(m['iteration']):4d}  trained on {int(m['train_paths']):5d} paths"
+                f"  recon {m['recon_loss']:.4f}  dropped {m['elites_dropped']:.0f}"
+                f"  coverage {m['coverage']:.4f}  best {m['best_loss']:.3f}"
+                f"  t={time.perf_counter() - started:.0f}s",
+                flush=True,
+            )
+    total_s = time.perf_counter() - started
+    m = optimizer.metrics()
+    elites = optimizer.archive.elites
+    assert elites is not None
+    valid = valid_rows(elites.error)
+    summary = {
+        "evaluations": optimizer.evaluations,
+        "iterations": optimizer.iteration,
+        "trainings": optimizer.trainings,
+        "total_s": total_s,
+        "training_s": optimizer.training_seconds,
+        "evaluation_s": evaluate_s,
+        "other_s": total_s - optimizer.training_seconds - evaluate_s,
+        "training_steps": steps,
+        "ms_per_step": 1e3 * optimizer.training_seconds / max(steps, 1),
+        "coverage": m["coverage"],
+        "valid_elites": int(valid.size),
+        "best_loss": m["best_loss"],
+        "qd_score": m["qd_score"],
+    }
+    paths = optimizer.paths_of(elites.foot_x[valid], elites.foot_y[valid])
+    summary |= compare_loops(paths, optimizer.aurora, args.compare_epochs, args.seed)
+    for key, value in summary.items():
+        print(f"{key:>14}: {value:.4g}" if isinstance(value, float) else f"{key:>14}: {value}")
+    print(
+        f"ratio: the fused training loop runs {summary['speedup']:.2f}x the plain "
+        f"torch.nn+autograd+torch.optim loop's per-sample throughput "
+        f"({paths.shape[0]} paths, batch {optimizer.aurora.ae_batch_size})"
+    )
+    if args.json:
+        with open(args.json, "w") as handle:
+            json.dump(summary | {"settings": optimizer.settings()["aurora"]}, handle, indent=1)
+
+
+if __name__ == "__main__":
+    main()

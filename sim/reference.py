@@ -1,0 +1,540 @@
+"""Provides the plain per-linkage reference simulator, the oracle for the fast kernel.
+
+It follows `linkage-spec.md` sections 1 to 5 and `docs/simulator.md` one linkage at a time,
+written for clarity rather than speed: small dataclasses, the `math` module, no batching.
+The tests hold the batched kernel (`sim.evaluate`) equal to it to 1e-9.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.evaluation import FITNESSES, MODES, Evaluation
+from sim.fitness import Target, named_target
+from sim.genome import (
+    BLOCK_SIZE,
+    CRANK_GENE,
+    FIRST_BLOCK,
+    N_BLOCKS,
+    N_NODES,
+    N_STATIC,
+    validate_genomes,
+)
+
+Point = tuple[float, float]
+
+TOLERANCE = 0.1
+"""Tolerance t of circle_intersection (spec §2, as published)."""
+MAX_LENGTH = 15.0
+MIN_LENGTH = 2.0
+MAX_ANCHOR_DISTANCE = 30.0
+CONTACT_BAND = 0.5
+"""Height of the F_sl contact band above the lowest path point (5 mm)."""
+MOTOR = 0
+CRANK_TIP = N_STATIC + 1
+
+
+def fti(gene: float, count: int) -> int:
+    """Returns floor(gene * count), the spec's gene-to-integer rule (gene >= 0)."""
+    return int(gene * count)
+
+
+def distance(p: Point, q: Point) -> float:
+    """Returns the Euclidean distance |q - p| as sqrt(dx*dx + dy*dy) (docs/simulator.md)."""
+    dx = q[0] - p[0]
+    dy = q[1] - p[1]
+    return math.sqrt(dx * dx + dy * dy)
+
+
+@dataclass(frozen=True)
+class Beam:
+    """One rigid beam.
+
+    Attributes:
+        start: the node it starts at (an anchor, or where an extension starts).
+        end: the node it holds (the crank tip or an added node).
+        length: its decoded length.
+        kind: "crank", "triangle" or "extension".
+        parent: the beam an extension continues; -1 for other kinds.
+        inverted: True for an extension that continues its parent backwards.
+    """
+
+    start: int
+    end: int
+    length: float
+    kind: str
+    parent: int = -1
+    inverted: bool = False
+
+
+@dataclass(frozen=True)
+class Triangle:
+    """An added node held by beams of lengths l1 from anchor A and l2 from anchor C."""
+
+    node: int
+    anchor_a: int
+    anchor_c: int
+    l1: float
+    l2: float
+    direction: int
+    backup_angle: float
+
+
+@dataclass(frozen=True)
+class Extension:
+    """An added node that continues beam `parent` rigidly by `length` (beam index `beam`)."""
+
+    node: int
+    beam: int
+    parent: int
+    inverted: bool
+    length: float
+
+
+@dataclass(frozen=True)
+class Linkage:
+    """One decoded linkage.
+
+    Attributes:
+        mode: "paper" or "legacy".
+        crank_length: length of the crank (beam 0).
+        blocks: the seven added nodes, in decode order.
+        beams: every beam, in decode order.
+        nodes: the 12 node positions at crank angle 0.
+    """
+
+    mode: str
+    crank_length: float
+    blocks: tuple[Triangle | Extension, ...]
+    beams: tuple[Beam, ...]
+    nodes: tuple[Point, ...]
+
+    @property
+    def static_nodes(self) -> tuple[Point, ...]:
+        """Returns the motor and the static nodes, which never move."""
+        return self.nodes[:CRANK_TIP]
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Every node position and beam angle at one crank angle."""
+
+    positions: tuple[Point, ...]
+    beam_angles: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A linkage simulated over A crank angles.
+
+    Attributes:
+        crank_angles: (A,) the crank angle of each sample.
+        positions: (12, A, 2) node positions, NaN at failed angles.
+        valid: (A,) True where the linkage assembled.
+        beam_angles: (B, A) recorded beam angles, NaN at failed angles.
+        foot: index of the foot node.
+        foot_path: (n, 2) the foot's recorded samples, in angle order.
+        foot_angles: (n,) mean angle of the beams that end at the foot, per recorded sample.
+    """
+
+    crank_angles: np.ndarray
+    positions: np.ndarray
+    valid: np.ndarray
+    beam_angles: np.ndarray
+    foot: int
+    foot_path: np.ndarray
+    foot_angles: np.ndarray
+
+    @property
+    def error(self) -> int:
+        """Returns the number of failed crank angles."""
+        return int((~self.valid).sum())
+
+
+def check_mode(mode: str) -> None:
+    """Raises ValueError unless `mode` is "paper" or "legacy"."""
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+
+
+def circle_intersection(
+    p0: Point, p1: Point, r0: float, r1: float, direction: int, backup_angle: float, mode: str
+) -> Point | None:
+    """Returns a point at distance r0 from p0 and r1 from p1 (spec §2), or None.
+
+    `direction` picks the intersection (0: to the right of p0 -> p1, 1: to the left);
+    `backup_angle` places the point when the circles coincide. Inside the tolerance band
+    the distance is nudged by t and used for the unit vector p0 -> p1 too, as published.
+    """
+    dx = p1[0] - p0[0]
+    dy = p1[1] - p0[1]
+    d = math.sqrt(dx * dx + dy * dy)
+    if d - TOLERANCE > r0 + r1 or d + TOLERANCE < abs(r0 - r1):
+        return None
+    if d == 0.0 and r0 == r1:
+        centre = (0.0, 0.0) if mode == "legacy" else p0
+        return (centre[0] + r0 * math.cos(backup_angle), centre[1] + r0 * math.sin(backup_angle))
+    nudged = d
+    if d > r0 + r1:
+        nudged = d - TOLERANCE
+    elif d < abs(r0 - r1):
+        nudged = d + TOLERANCE
+    ex = dx / nudged
+    ey = dy / nudged
+    if mode == "legacy" and abs(d - r0 + r1) < TOLERANCE:
+        return (p0[0] + r0 * ex, p0[1] + r0 * ey)
+    a = (r0 * r0 - r1 * r1 + nudged * nudged) / (2.0 * nudged)
+    h = math.sqrt(max(r0 * r0 - a * a, 0.0))
+    mx = p0[0] + a * ex
+    my = p0[1] + a * ey
+    if direction == 0:
+        return (mx + h * ey, my - h * ex)
+    return (mx - h * ey, my + h * ex)
+
+
+def unit_vector(start: Point, end: Point) -> Point:
+    """Returns the unit vector start -> end; (1, 0) when they coincide (atan2(0, 0) = 0)."""
+    dx = end[0] - start[0]
+    dy = end[1] - start[1]
+    norm = math.sqrt(dx * dx + dy * dy)
+    if norm == 0.0:
+        return (1.0, 0.0)
+    return (dx / norm, dy / norm)
+
+
+def beam_angle(start: Point, end: Point) -> float:
+    """Returns the angle of the beam start -> end, in (-pi, pi]."""
+    return math.atan2(end[1] - start[1], end[0] - start[0])
+
+
+@dataclass
+class Frame:
+    """Working state while placing nodes at one crank angle, in decode order.
+
+    Attributes:
+        positions: node positions placed so far.
+        directions: unit direction (start -> end) of each beam placed so far.
+        angles: recorded angle of each beam placed so far (docs/simulator.md).
+    """
+
+    positions: list[Point]
+    directions: list[Point]
+    angles: list[float]
+
+    @staticmethod
+    def start(static_nodes: tuple[Point, ...], crank_length: float, theta: float) -> Frame:
+        """Returns the frame with the motor, static nodes and crank tip at angle theta."""
+        c, s = math.cos(theta), math.sin(theta)
+        tip = (crank_length * c, crank_length * s)
+        return Frame([*static_nodes, tip], [(c, s)], [theta])
+
+    def place(self, block: Triangle | Extension, beams: tuple[Beam, ...], mode: str) -> bool:
+        """Places the block's node and its beams; returns False if a triangle fails."""
+        if isinstance(block, Extension):
+            ux, uy = self.directions[block.parent]
+            angle = self.angles[block.parent]
+            parent = beams[block.parent]
+            start = parent.end
+            if block.inverted:
+                ux, uy, angle, start = -ux, -uy, angle + math.pi, parent.start
+            x, y = self.positions[start]
+            self.positions.append((x + block.length * ux, y + block.length * uy))
+            self.directions.append((ux, uy))
+            self.angles.append(angle)
+            return True
+        a = self.positions[block.anchor_a]
+        c = self.positions[block.anchor_c]
+        point = circle_intersection(
+            a, c, block.l1, block.l2, block.direction, block.backup_angle, mode
+        )
+        if point is None:
+            return False
+        self.positions.append(point)
+        for anchor in (a, c):
+            self.directions.append(unit_vector(anchor, point))
+            self.angles.append(beam_angle(anchor, point))
+        return True
+
+
+def repair_anchor_c(a: int, c: int, positions: list[Point]) -> int:
+    """Returns anchor C after the spec's repair loop (spec §2, docs/simulator.md).
+
+    C is decremented (1 wraps to the last node) while it equals A, is over 30 from A or is
+    under 0.1 from A; once C comes back to its first value the loop runs again without the
+    "under 0.1" test, and stops at the first value if it comes back again.
+    """
+    first = c
+    for test_near in (True, False):
+        while (
+            c == a
+            or distance(positions[a], positions[c]) > MAX_ANCHOR_DISTANCE
+            or (test_near and distance(positions[a], positions[c]) < TOLERANCE)
+        ):
+            c = c - 1 if c > 1 else len(positions) - 1
+            if c == first:
+                break
+        else:
+            return c
+    return c
+
+
+def decode_block(g: list[float], i: int, beams: list[Beam], frame: Frame, mode: str):
+    """Returns block i (Triangle or Extension) read from genes g, at the frame's positions."""
+    o = FIRST_BLOCK + BLOCK_SIZE * i
+    node = len(frame.positions)
+    if fti(g[o], 4) == 0:
+        length = 12.0 * g[CRANK_GENE] + 3.0 if mode == "legacy" else 2.0 + 13.0 * g[o + 6]
+        return Extension(node, len(beams), fti(g[o + 1], len(beams)), fti(g[o + 3], 2) == 1, length)
+    a = fti(g[o + 1], node - 1) + 1
+    c = repair_anchor_c(a, fti(g[o + 2], node - 1) + 1, frame.positions)
+    d = distance(frame.positions[a], frame.positions[c])
+    s1 = max(d - MAX_LENGTH, MIN_LENGTH)
+    l1 = (MAX_LENGTH - s1) * g[o + 5] + s1
+    lo = abs(d - l1)
+    hi = min(d + l1, MAX_LENGTH)
+    l2 = (hi - lo) * g[o + 6] + lo
+    return Triangle(node, a, c, l1, l2, fti(g[o + 3], 2), 2.0 * math.pi * g[o + 4])
+
+
+def decode_linkage(genome: np.ndarray, mode: str = "paper") -> Linkage:
+    """Returns the linkage a genome (56,) encodes, with its nodes at crank angle 0."""
+    check_mode(mode)
+    g = [float(v) for v in validate_genomes(np.asarray(genome)[None, :])[0]]
+    static_nodes = [(0.0, 0.0)]
+    for j in range(N_STATIC):
+        static_nodes.append((fti(g[2 * j], 11) - 5.0, fti(g[2 * j + 1], 11) - 5.0))
+    crank_length = 2.0 + 6.0 * g[CRANK_GENE]
+    frame = Frame.start(tuple(static_nodes), crank_length, 0.0)
+    beams = [Beam(MOTOR, CRANK_TIP, crank_length, "crank")]
+    blocks: list[Triangle | Extension] = []
+    for i in range(N_BLOCKS):
+        block = decode_block(g, i, beams, frame, mode)
+        if isinstance(block, Extension):
+            parent = beams[block.parent]
+            start = parent.start if block.inverted else parent.end
+            beams.append(
+                Beam(start, block.node, block.length, "extension", block.parent, block.inverted)
+            )
+        else:
+            beams.append(Beam(block.anchor_a, block.node, block.l1, "triangle"))
+            beams.append(Beam(block.anchor_c, block.node, block.l2, "triangle"))
+        if not frame.place(block, tuple(beams), mode):
+            raise RuntimeError(f"block {i} does not assemble at crank angle 0 (spec §2): {g}")
+        blocks.append(block)
+    return Linkage(mode, crank_length, tuple(blocks), tuple(beams), tuple(frame.positions))
+
+
+def pose(linkage: Linkage, theta: float) -> Pose | None:
+    """Returns every node and beam angle at crank angle theta, or None if it fails."""
+    frame = Frame.start(linkage.static_nodes, linkage.crank_length, theta)
+    for block in linkage.blocks:
+        if not frame.place(block, linkage.beams, linkage.mode):
+            return None
+    return Pose(tuple(frame.positions), tuple(frame.angles))
+
+
+def crank_angles(n_angles: int, mode: str) -> list[float]:
+    """Returns the A crank angles: k*2*pi/A (paper) or accumulated steps (legacy)."""
+    if mode == "paper":
+        return [k * 2.0 * math.pi / n_angles for k in range(n_angles)]
+    step = 2.0 * math.pi / n_angles
+    thetas = [0.0]
+    for _ in range(n_angles - 1):
+        thetas.append(thetas[-1] + step)
+    return thetas
+
+
+def simulate_linkage(linkage: Linkage, n_angles: int = 40) -> Motion:
+    """Returns the motion of a linkage over `n_angles` crank angles, in its mode (spec §3)."""
+    thetas = crank_angles(n_angles, linkage.mode)
+    poses = [pose(linkage, theta) for theta in thetas]
+    recorded = [p for p in poses if p is not None]
+    lowest = [min(p.positions[n][1] for p in recorded) for n in range(N_NODES)]
+    foot = min(range(N_NODES), key=lambda n: (lowest[n], n))
+    into_foot = [b for b, beam in enumerate(linkage.beams) if beam.end == foot]
+    foot_angles = [
+        sum(p.beam_angles[b] for b in into_foot) / len(into_foot) if into_foot else 0.0
+        for p in recorded
+    ]
+    failed = Pose(((math.nan, math.nan),) * N_NODES, (math.nan,) * len(linkage.beams))
+    filled = [failed if p is None else p for p in poses]
+    return Motion(
+        crank_angles=np.array(thetas),
+        positions=np.array([p.positions for p in filled]).transpose(1, 0, 2),
+        valid=np.array([p is not None for p in poses]),
+        beam_angles=np.array([p.beam_angles for p in filled]).T,
+        foot=foot,
+        foot_path=np.array([p.positions[foot] for p in recorded]),
+        foot_angles=np.array(foot_angles),
+    )
+
+
+def angle_error(motion: Motion, mode: str) -> float:
+    """Returns F_ae: samples where the foot points upwards (spec §3).
+
+    paper: their count; legacy: the summed distance from each such sample to the previous
+    recorded sample (wrapping to the last). Zero when no beam ends at the foot.
+    """
+    path = [(float(x), float(y)) for x, y in motion.foot_path]
+    total = 0.0
+    for i, mean_angle in enumerate(motion.foot_angles):
+        if 0.0 < mean_angle < math.pi:
+            total += 1.0 if mode == "paper" else distance(path[i - 1], path[i])
+    return total
+
+
+def target_distances(path: np.ndarray, target: Target) -> tuple[float, float]:
+    """Returns (D over step points, D over lift points) of a foot path (n, 2) (spec §4).
+
+    D sums, over target points, the distance to the nearest path point, the path taken
+    relative to its centroid.
+    """
+    n = len(path)
+    cx = sum(float(x) for x, _ in path) / n
+    cy = sum(float(y) for _, y in path) / n
+    centred = [(float(x) - cx, float(y) - cy) for x, y in path]
+    step = lift = 0.0
+    for (tx, ty), is_step in zip(target.points.tolist(), target.is_step.tolist(), strict=True):
+        nearest = min(distance((tx, ty), p) for p in centred)
+        if is_step:
+            step += nearest
+        else:
+            lift += nearest
+    return step, lift
+
+
+def step_and_lift(path: np.ndarray) -> tuple[float, float]:
+    """Returns (F_s, F_l) of a foot path (n, 2), the paper's definition made precise in
+    docs/simulator.md: stance length in the contact band and swing height."""
+    xs = [float(x) for x, _ in path]
+    ys = [float(y) for _, y in path]
+    n = len(xs)
+    y_min = min(ys)
+    lowest = ys.index(y_min)
+    dx = [xs[(i + 1) % n] - xs[i] for i in range(n)]
+    sign = [(v > 0) - (v < 0) for v in dx]
+    stance = sign[lowest] if sign[lowest] != 0 else 1
+    in_band = [y - y_min <= CONTACT_BAND for y in ys]
+    step = sum(
+        abs(dx[i]) for i in range(n) if in_band[i] and in_band[(i + 1) % n] and sign[i] == stance
+    )
+    lift = max([0.0] + [ys[j] - y_min for j in range(n) if sign[j] == -stance])
+    return step, lift
+
+
+def decode_graph_parents(linkage: Linkage) -> list[list[int]]:
+    """Returns each node's parents in the decode graph (docs/simulator.md, MAP-ST)."""
+    parents: list[list[int]] = [[] for _ in range(CRANK_TIP)] + [[MOTOR]]
+    for block in linkage.blocks:
+        if isinstance(block, Extension):
+            beam = linkage.beams[block.parent]
+            parents.append([beam.start, beam.end])
+        else:
+            parents.append([block.anchor_a, block.anchor_c])
+    return parents
+
+
+def structure_descriptors(linkage: Linkage, foot: int) -> tuple[float, float, float]:
+    """Returns (depth, drive size, moving share) of the foot, unscaled (docs/simulator.md)."""
+    parents = decode_graph_parents(linkage)
+    depth = [0] * len(parents)
+    for node in range(CRANK_TIP, len(parents)):
+        depth[node] = 1 + max(depth[p] for p in parents[node])
+
+    def ancestors(node: int) -> set[int]:
+        found = {node}
+        for p in parents[node]:
+            found |= ancestors(p)
+        return found
+
+    drive = ancestors(foot)
+    moving = [n for n in drive if CRANK_TIP in ancestors(n)]
+    return float(depth[foot]), float(len(drive)), len(moving) / len(drive)
+
+
+def mean_beam_length(linkage: Linkage) -> float:
+    """Returns m = mean((len - 2) * 10/13) over every beam, crank included."""
+    scaled = [(beam.length - 2.0) * 10.0 / 13.0 for beam in linkage.beams]
+    return sum(scaled) / len(scaled)
+
+
+def descriptors(linkage: Linkage, motion: Motion) -> dict[str, list[float]]:
+    """Returns the continuous MAP-WH, MAP-LIS and MAP-ST descriptors of one linkage."""
+    path = motion.foot_path
+    height = float(path[:, 1].max() - path[:, 1].min())
+    width = float(path[:, 0].max() - path[:, 0].min())
+    m = mean_beam_length(linkage)
+    _, lift = step_and_lift(path)
+    depth, drive, share = structure_descriptors(linkage, motion.foot)
+    return {
+        "MAP-WH": [height, width],
+        "MAP-LIS": [m, lift],
+        "MAP-ST": [m, depth * 10.0 / 9.0, drive * 10.0 / 13.0, share * 10.0],
+    }
+
+
+def losses(motion: Motion, fitness: str, mode: str, target: Target) -> list[float]:
+    """Returns the loss of one motion: one value (Fp, Fsl) or two (Fp2, Fsl2) (spec §4)."""
+    penalty = motion.error + angle_error(motion, mode)
+    if fitness in ("Fp", "Fp2"):
+        step, lift = target_distances(motion.foot_path, target)
+        if fitness == "Fp":
+            return [step + lift + penalty]
+        return [step + penalty, lift + penalty]
+    step, lift = step_and_lift(motion.foot_path)
+    if fitness == "Fsl":
+        return [-0.8 * step - 0.2 * lift + penalty]
+    return [-step + penalty, -lift + penalty]
+
+
+def evaluate_reference(
+    genomes: np.ndarray,
+    fitness: str = "Fp",
+    mode: str = "paper",
+    target: Target | None = None,
+    n_angles: int = 40,
+) -> Evaluation:
+    """Returns the Evaluation of genomes (N, 56), one linkage at a time (as `sim.evaluate`)."""
+    if fitness not in FITNESSES:
+        raise ValueError(f"fitness must be one of {FITNESSES}, got {fitness!r}")
+    check_mode(mode)
+    if isinstance(n_angles, bool) or not isinstance(n_angles, int) or n_angles < 2:
+        raise ValueError(f"n_angles must be an integer >= 2, got {n_angles!r}")
+    target = named_target("D16") if target is None else target
+    genomes = validate_genomes(genomes)
+    rows = []
+    for genome in genomes:
+        linkage = decode_linkage(genome, mode)
+        motion = simulate_linkage(linkage, n_angles)
+        foot_xy = motion.positions[motion.foot]
+        rows.append(
+            (
+                losses(motion, fitness, mode, target),
+                motion.error,
+                angle_error(motion, mode),
+                motion.valid,
+                motion.foot,
+                foot_xy[:, 0],
+                foot_xy[:, 1],
+                descriptors(linkage, motion),
+            )
+        )
+    n = len(rows)
+    n_objectives = 1 if fitness in ("Fp", "Fsl") else 2
+    loss = np.array([r[0] for r in rows], dtype=np.float64).reshape(n, n_objectives)
+    return Evaluation(
+        loss=loss[:, 0] if n_objectives == 1 else loss,
+        error=np.array([r[1] for r in rows], dtype=np.int64),
+        angle_error=np.array([r[2] for r in rows], dtype=np.float64),
+        valid=np.array([r[3] for r in rows], dtype=bool).reshape(n, n_angles),
+        foot=np.array([r[4] for r in rows], dtype=np.int64),
+        foot_x=np.array([r[5] for r in rows], dtype=np.float64).reshape(n, n_angles),
+        foot_y=np.array([r[6] for r in rows], dtype=np.float64).reshape(n, n_angles),
+        descriptors={
+            name: np.array([r[7][name] for r in rows], dtype=np.float64).reshape(n, -1)
+            for name in ("MAP-WH", "MAP-LIS", "MAP-ST")
+        },
+    )
