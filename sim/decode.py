@@ -22,8 +22,10 @@ class LinkageBatch:
         mode: "paper" or "legacy".
         node_int: (N, 12, 4) int64 per node [kind, a, c, direction]; triangle a, c are
             anchors A, C; extension a is the parent beam and c the inverted flag.
-        node_float: (N, 12, 3) float64 per node; triangle [l1, l2, backup angle];
-            extension [length, 0, 0]; static [x, y, 0]; crank tip [crank length, 0, 0].
+        node_float: (N, 12, 5) float64 per node; triangle [l1, l2, backup angle,
+            l1 cos(backup), l1 sin(backup) (0, 0 unless l1 == l2)]; extension [length, 0...];
+            static [x, y, 0...];
+            crank tip [crank length, 0...].
         beam_int: (N, 15, 6) int64 per beam [start, end, kind, parent, root, inversions],
             -1 where absent (see `sim.kernels.decode_one`).
         beam_length: (N, 15) float64, 0 where absent.
@@ -78,7 +80,7 @@ def decode(genomes: np.ndarray, mode: str = "paper") -> LinkageBatch:
     batch = LinkageBatch(
         mode=mode,
         node_int=np.empty((n, N_NODES, 4), np.int64),
-        node_float=np.empty((n, N_NODES, 3)),
+        node_float=np.empty((n, N_NODES, 5)),
         beam_int=np.empty((n, MAX_BEAMS, 6), np.int64),
         beam_length=np.empty((n, MAX_BEAMS)),
         n_beams=np.empty(n, np.int64),

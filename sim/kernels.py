@@ -92,8 +92,8 @@ def place_node(new, b, ni, nf, bi, legacy, xs, ys, ux, uy, ok):
     r0 = nf[new, 0]
     r1 = nf[new, 1]
     side = 1.0 if ni[new, 3] == 0 else -1.0
-    back_x = r0 * math.cos(nf[new, 2])
-    back_y = r0 * math.sin(nf[new, 2])
+    back_x = nf[new, 3]
+    back_y = nf[new, 4]
     r_sum = r0 + r1
     r_diff = abs(r0 - r1)
     for k in range(n):
@@ -126,10 +126,11 @@ def place_node(new, b, ni, nf, bi, legacy, xs, ys, ux, uy, ok):
 def decode_one(g, legacy, ni, nf, bi, bf, xs, ys, ux, uy, ok):
     """Decodes one genome (56,) at crank angle 0; returns the number of beams.
 
-    Fills ni (12, 4) int [kind, a, c, dir], nf (12, 3) float [p0, p1, p2], bi (15, 6) int
+    Fills ni (12, 4) int [kind, a, c, dir], nf (12, 5) float [p0 .. p4], bi (15, 6) int
     [start, end, kind, parent, root, inversions], bf (15,) beam lengths, and the positions
     at angle 0 in column 0 of xs/ys (12, >=1); ux/uy (15, >=1) and ok (>=1,) are scratch.
-    Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle. Extension: a=parent beam,
+    Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle, p3/p4=l1 times its cosine and
+    sine (the backup point's offset; only when l1 == l2, else 0). Extension: a=parent beam,
     c=inverted, p0=length. Static: p0=x, p1=y. Crank tip: p0=crank length. An extension's
     root is the crank or triangle beam its chain of parents starts from, and inversions
     counts the inverted links on that chain (its angle is the root's plus that many pi).
@@ -184,6 +185,9 @@ def decode_one(g, legacy, ni, nf, bi, bf, xs, ys, ux, uy, ok):
             nf[new, 0] = l1
             nf[new, 1] = l2
             nf[new, 2] = 2.0 * math.pi * g[o + 4]
+            if l1 == l2:  # the backup point serves only coincident anchors with r0 == r1
+                nf[new, 3] = l1 * math.cos(nf[new, 2])
+                nf[new, 4] = l1 * math.sin(nf[new, 2])
             set_beam(bi, bf, n_beams, a, new, B_TRIANGLE, -1, l1)
             set_beam(bi, bf, n_beams + 1, c, new, B_TRIANGLE, -1, l2)
             n_added = 2
@@ -435,12 +439,12 @@ def step_and_lift(px, py, n):
         if py[i] < py[low]:
             low = i
     y_min = py[low]
-    dx_low = px[(low + 1) % n] - px[low]
+    dx_low = px[low + 1 if low + 1 < n else 0] - px[low]
     stance = -1.0 if dx_low < 0.0 else 1.0
     f_s = 0.0
     f_l = 0.0
     for i in range(n):
-        j = (i + 1) % n
+        j = i + 1 if i + 1 < n else 0
         dx = px[j] - px[i]
         sign = 1.0 if dx > 0.0 else (-1.0 if dx < 0.0 else 0.0)
         if sign == stance and py[i] - y_min <= BAND and py[j] - y_min <= BAND:
@@ -518,7 +522,7 @@ def evaluate_batch(
     every = np.ones(targets.shape[0], np.bool_)
     for chunk in numba.prange(n_chunks):
         ni = np.empty((N_NODES, 4), np.int64)
-        nf = np.empty((N_NODES, 3))
+        nf = np.empty((N_NODES, 5))
         bi = np.empty((MAX_BEAMS, 6), np.int64)
         bf = np.empty(MAX_BEAMS)
         xs = np.empty((N_NODES, n_angles))

@@ -1,0 +1,164 @@
+"""Benchmarks the grid machinery: evaluator-actor scaling, Ray + MLflow overhead, quick preset.
+
+Run from the repository root:
+
+    .venv/bin/python benchmarks/grid_scaling.py [--skip-quick]
+
+Prints three measurements:
+1. one trial's evaluation throughput (batch 5,000) through 1 and 2 one-CPU evaluator
+   actors, with the in-process `sim.evaluate` (1 numba thread) and the plain per-linkage
+   reference `sim.reference.evaluate_reference` measured in the same run as baselines;
+2. the Ray + MLflow overhead per iteration at batch 5,000: the same EA trial through
+   `workers.trial.run_trial` with an in-process evaluator and no tracking, and with one
+   evaluator actor and an MLflow recorder on a fresh sqlite store (alternating, best of 3);
+3. the wall time of `linkevo grid configs/quick.toml` on a fresh store (unless skipped).
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+import ray
+
+from sim import evaluate, named_target, random_genomes
+from sim.reference import evaluate_reference
+from workers.evaluators import LocalEvaluator
+from workers.mlflow_recorder import MlflowRecorder
+from workers.ray_evaluator import ActorPoolEvaluator
+from workers.recorders import NullRecorder
+from workers.tracking import ensure_experiment
+from workers.trial import TrialSpec, run_trial
+
+BATCH = 5000
+REPEATS = 10
+REFERENCE_GENOMES = 100
+REPO = Path(__file__).resolve().parent.parent
+
+
+def best_seconds(fn, repeats: int = REPEATS) -> float:
+    """Returns the best wall time of `fn()` over `repeats` calls, after one warm-up (the
+    least disturbed by other load on a shared machine)."""
+    fn()
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - start)
+    return min(times)
+
+
+def actor_scaling(genomes: np.ndarray) -> None:
+    """Prints evaluations per second through 1 and 2 actors and the two baselines."""
+    numba.set_num_threads(1)
+    local = best_seconds(lambda: evaluate(genomes, "Fp"))
+    few = genomes[:REFERENCE_GENOMES]
+    start = time.perf_counter()
+    evaluate_reference(few, "Fp", target=named_target("D16"))
+    reference_rate = len(few) / (time.perf_counter() - start)
+    rates = {}
+    for k in (1, 2):
+        with ActorPoolEvaluator.start(
+            n_actors=k, cpus_per_actor=1, fitness="Fp", mode="paper", target="D16", n_angles=40
+        ) as evaluator:
+            rates[k] = len(genomes) / best_seconds(lambda ev=evaluator: ev(genomes))
+    local_rate = len(genomes) / local
+    print(f"## 1. evaluation throughput, batch {len(genomes)} (best of {REPEATS})")
+    print(f"plain reference (sim.reference, 1 linkage at a time): {reference_rate:12,.0f} eval/s")
+    print(f"in-process sim.evaluate, 1 numba thread:             {local_rate:12,.0f} eval/s")
+    print(f"1 evaluator actor (1 CPU):                           {rates[1]:12,.0f} eval/s")
+    print(f"2 evaluator actors (1 CPU each):                     {rates[2]:12,.0f} eval/s")
+    print(f"speed-up 2 vs 1 actor: {rates[2] / rates[1]:.2f}x (target >= 1.6x)")
+    print(f"2 actors vs plain reference: {rates[2] / reference_rate:,.0f}x")
+
+
+def tracking_overhead(work: Path, iterations: int, rounds: int = 3) -> None:
+    """Prints the per-iteration cost of one evaluator actor plus MLflow tracking.
+
+    The untracked and tracked trials alternate `rounds` times and the best time of each is
+    kept, so a load spike on a shared machine does not land on one side only.
+    """
+    from mlflow.tracking import MlflowClient
+
+    numba.set_num_threads(1)
+    spec = TrialSpec(
+        approach="EA", fitness="Fp", evaluations=BATCH * iterations, batch_size=BATCH, seed=1
+    )
+    uri = f"sqlite:///{work / 'store' / 'mlflow.db'}"
+    experiment_id = ensure_experiment(uri, "bench")
+    client = MlflowClient(uri)
+    local, tracked = [], []
+    with ActorPoolEvaluator.start(
+        n_actors=1, cpus_per_actor=1, fitness="Fp", mode="paper", target="D16", n_angles=40
+    ) as evaluator:
+        evaluator(random_genomes(np.random.default_rng(0), 10))
+        for i in range(rounds):
+            start = time.perf_counter()
+            run_trial(spec, LocalEvaluator("Fp", "paper"), NullRecorder(), work / f"local{i}")
+            local.append(time.perf_counter() - start)
+            run_id = client.create_run(experiment_id, run_name=f"bench{i}").info.run_id
+            start = time.perf_counter()
+            run_trial(spec, evaluator, MlflowRecorder(client, run_id), work / f"tracked{i}")
+            tracked.append(time.perf_counter() - start)
+            client.set_terminated(run_id)
+    best_local, best_tracked = min(local), min(tracked)
+    per_iteration = (best_tracked - best_local) / iterations
+    print(f"\n## 2. Ray + MLflow overhead, EA trial of {iterations} iterations x {BATCH}")
+    print(f"(best of {rounds} alternating rounds)")
+    rows = (("in-process, untracked", best_local), ("1 actor + MLflow (sqlite)", best_tracked))
+    for name, seconds in rows:
+        print(f"{name:<28} {seconds:8.2f} s  ({seconds / iterations * 1000:7.1f} ms/iteration)")
+    print(
+        f"overhead: {per_iteration * 1000:.1f} ms per iteration = "
+        f"{100 * (best_tracked - best_local) / best_tracked:.1f} % of trial time (target <= 5 %)"
+    )
+
+
+def quick_preset(work: Path) -> None:
+    """Prints the wall time of the quick preset on a fresh store."""
+    command = [
+        str(REPO / ".venv" / "bin" / "linkevo"),
+        "grid",
+        str(REPO / "configs" / "quick.toml"),
+        "--tracking-uri",
+        str(work / "quick-store"),
+        "--no-progress",
+    ]
+    start = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    seconds = time.perf_counter() - start
+    print("\n## 3. quick preset (120 trials)")
+    print(done.stdout.strip().splitlines()[0] if done.stdout.strip() else done.stderr[-2000:])
+    print(f"wall time of linkevo grid configs/quick.toml: {seconds:.0f} s")
+    print(f"exit code {done.returncode}")
+
+
+def main() -> int:
+    """Runs the three measurements."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--batch", type=int, default=BATCH, help="batch of section 1")
+    parser.add_argument("--iterations", type=int, default=10)
+    parser.add_argument("--skip-quick", action="store_true")
+    args = parser.parse_args()
+    genomes = random_genomes(np.random.default_rng(0), args.batch)
+    ray.init(num_cpus=2, object_store_memory=300 * 1024**2, include_dashboard=False)
+    try:
+        actor_scaling(genomes)
+        with tempfile.TemporaryDirectory() as tmp:
+            tracking_overhead(Path(tmp), args.iterations)
+    finally:
+        ray.shutdown()
+    if not args.skip_quick:
+        with tempfile.TemporaryDirectory() as tmp:
+            quick_preset(Path(tmp))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

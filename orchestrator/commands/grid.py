@@ -1,0 +1,119 @@
+"""Provides `linkevo grid` (run a grid of trials on Ray) and `linkevo ui` (the MLflow UI)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+
+from orchestrator.cli import CliError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds the `grid` and `ui` subcommands."""
+    grid = subparsers.add_parser(
+        "grid",
+        help="run a grid of trials on Ray, tracked in MLflow",
+        description="Run every trial of a grid config on Ray (a local instance, or the "
+        "cluster at --address / RAY_ADDRESS), one nested MLflow run per trial.",
+    )
+    grid.add_argument("config", help="grid config TOML, e.g. configs/quick.toml")
+    grid.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config key with a TOML value, e.g. --set trials=3 "
+        '--set \'approaches=["EA","MAP-LIS"]\' (repeatable)',
+    )
+    grid.add_argument(
+        "--tracking-uri",
+        help="MLflow tracking URI (http://host:port, sqlite:///abs/path.db) or a folder for "
+        "an embedded store; default: config key tracking_uri, MLFLOW_TRACKING_URI, runs/",
+    )
+    grid.add_argument("--address", help="Ray address (default: RAY_ADDRESS, else start one)")
+    grid.add_argument(
+        "--resume",
+        action="store_true",
+        help="complete an earlier launch: skip FINISHED trials, rerun the rest",
+    )
+    grid.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="print the resolved config and the trials, start nothing",
+    )
+    grid.add_argument("--max-concurrent-trials", type=int, metavar="N")
+    grid.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    grid.set_defaults(func=run_grid)
+
+    ui = subparsers.add_parser(
+        "ui",
+        help="open the MLflow UI on the project's store (loopback only)",
+        description="Serve the MLflow UI for the store on 127.0.0.1.",
+    )
+    ui.add_argument(
+        "--tracking-uri",
+        help="store to browse (default: MLFLOW_TRACKING_URI, else the embedded runs/ store)",
+    )
+    ui.add_argument("--port", type=int, default=5000)
+    ui.set_defaults(func=run_ui)
+
+
+def run_grid(args: argparse.Namespace) -> int:
+    """Runs (or with --dry-run describes) a grid; exit 1 when any trial failed."""
+    from orchestrator import config as grid_config
+    from orchestrator.grid import Grid
+
+    overrides = list(args.overrides)
+    if args.tracking_uri is not None:
+        overrides.append(f"tracking_uri={json.dumps(args.tracking_uri)}")
+    if args.max_concurrent_trials is not None:
+        overrides.append(f"max_concurrent_trials={args.max_concurrent_trials}")
+    grid = Grid.from_config(grid_config.load(args.config, overrides))
+    from orchestrator import driver
+
+    if args.dry_run:
+        print(driver.describe(grid))
+        return 0
+    result = driver.launch(
+        grid, resume=args.resume, address=args.address, progress=not args.no_progress
+    )
+    print(driver.summary(result, grid.config))
+    print(
+        f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."
+    )
+    print(f"Open the UI with:  linkevo ui{_ui_flag(result.tracking_uri)}")
+    return 1 if result.failed else 0
+
+
+def _ui_flag(uri: str) -> str:
+    from workers.tracking import default_tracking_uri
+
+    return "" if uri == default_tracking_uri() else f" --tracking-uri '{uri}'"
+
+
+def run_ui(args: argparse.Namespace) -> int:
+    """Runs `mlflow ui` on the store, bound to 127.0.0.1, until interrupted."""
+    from workers.tracking import artifact_root_for, resolve_tracking_uri
+
+    uri = resolve_tracking_uri(args.tracking_uri)
+    if uri.startswith(("http://", "https://")):
+        raise CliError(
+            f"--tracking-uri {uri!r} is already a server: open it in a browser; "
+            "allowed here: a sqlite:/// URI or a store folder"
+        )
+    if uri.startswith("sqlite:///") and not os.path.exists(uri.removeprefix("sqlite:///")):
+        raise CliError(
+            f"no MLflow store at {uri.removeprefix('sqlite:///')}; run a grid first "
+            "(linkevo grid configs/quick.toml) or pass --tracking-uri"
+        )
+    command = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri]
+    artifacts = artifact_root_for(uri)
+    if artifacts:
+        command += ["--default-artifact-root", artifacts]
+    command += ["--host", "127.0.0.1", "--port", str(args.port)]
+    print(f"MLflow UI on http://127.0.0.1:{args.port}  (Ctrl-C stops it)", file=sys.stderr)
+    return subprocess.call(command)

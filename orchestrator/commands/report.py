@@ -1,0 +1,74 @@
+"""Provides `linkevo report`: a grid's figures, statistics and findings from MLflow."""
+
+from __future__ import annotations
+
+import argparse
+import re
+from pathlib import Path
+
+from orchestrator.cli import CliError
+
+GRID_ID = re.compile(r"[A-Za-z0-9_.-]+")
+"""What a grid id may hold (it goes into an MLflow filter string)."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds the `report` subcommand."""
+    parser = subparsers.add_parser(
+        "report",
+        help="build a grid's comparison figures, statistics and findings from MLflow",
+        description=(
+            "Reads a grid's trial runs from MLflow and writes PNG/PDF figures, CSV tables "
+            "and one self-contained report.html, also logged under report/ in the grid's "
+            "parent run."
+        ),
+    )
+    which = parser.add_mutually_exclusive_group(required=True)
+    which.add_argument("grid_id", nargs="?", help="the grid id (tag grid_id of its runs)")
+    which.add_argument("--latest", action="store_true", help="report the latest grid")
+    parser.add_argument(
+        "--tracking-uri",
+        default=None,
+        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
+    )
+    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="output folder (default: reports/<grid_id>)"
+    )
+    parser.add_argument(
+        "--no-log", action="store_true", help="do not log the report to the grid's parent run"
+    )
+    parser.set_defaults(func=handler)
+
+
+def handler(args: argparse.Namespace) -> int:
+    """Builds the report and prints where it is and the findings' verdicts."""
+    from orchestrator.report import GridNotFoundError, build_report
+    from workers.tracking import resolve_tracking_uri
+
+    if args.grid_id is not None and not GRID_ID.fullmatch(args.grid_id):
+        raise CliError(
+            f"grid id {args.grid_id!r} is invalid; allowed: letters, digits, '.', '_', '-' "
+            "(see the grid_id tag of a grid run, or use --latest)"
+        )
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise CliError(f"--out {str(args.out)!r} is a file; allowed: a folder (new or existing)")
+    uri = resolve_tracking_uri(args.tracking_uri)
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).is_file():
+        raise CliError(f"--tracking-uri {uri!r}: no MLflow database there; run a grid first")
+    try:
+        result = build_report(
+            uri,
+            None if args.latest else args.grid_id,
+            args.out,
+            experiment=args.experiment,
+            log_to_mlflow=not args.no_log,
+        )
+    except GridNotFoundError as exc:
+        raise CliError(str(exc)) from exc
+    print(f"grid {result.grid_id}: report at {result.html}")
+    for finding in result.findings:
+        print(f"  [{finding.verdict}] {finding.claim} {finding.evidence}")
+    if not args.no_log:
+        print(f"logged under report/ in parent run {result.parent_run_id}")
+    return 0

@@ -1,0 +1,288 @@
+"""Provides GridConfig: the validated, resolved configuration of one grid of trials."""
+
+from __future__ import annotations
+
+import difflib
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+from algorithms.factory import APPROACHES
+from algorithms.optimizer import SINGLE_FITNESSES
+from orchestrator.cli import CliError
+from sim.evaluation import MODES
+
+TARGETS: tuple[str, ...] = ("D16", "D24")
+"""The named F_p targets a grid may use."""
+EXECUTION_KEYS: frozenset[str] = frozenset(
+    {
+        "evaluators_per_trial",
+        "cpus_per_evaluator",
+        "trial_cpus",
+        "checkpoint_every",
+        "max_concurrent_trials",
+        "max_retries",
+        "experiment",
+        "tracking_uri",
+        "work_dir",
+    }
+)
+"""Keys that say how and where a grid runs, not what it computes: left out of the grid id."""
+
+
+class ConfigError(CliError):
+    """A grid configuration that cannot be used; the message names the key and what is allowed."""
+
+
+@dataclass(frozen=True)
+class GridConfig:
+    """One grid: `trials` seeds of every (approach, fitness) cell, and how to run them.
+
+    Attributes:
+        trials: trials per (approach, fitness) cell, >= 1.
+        approaches: search approaches, a subset of `APPROACHES`.
+        fitnesses: fitness functions the trials optimise, a subset of ("Fp", "Fsl").
+        evaluations: evaluation budget per trial, >= 1.
+        batch_size: children per iteration (and the initial population), >= 1.
+        mode: "paper" or "legacy".
+        seed: grid seed every trial seed derives from, >= 0.
+        target: named F_p target ("D16" or "D24").
+        n_angles: crank angles simulated per linkage, >= 3.
+        max_seconds: optional wall-clock budget per trial (seconds, > 0).
+        options: per-approach option tables (`options["MAP-AU"] = {...}`) passed to that
+            approach's optimizer (`algorithms.make_optimizer`).
+        evaluators_per_trial: evaluator actors per trial (K), >= 1.
+        cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
+        trial_cpus: CPUs reserved by the trial task itself, >= 0; 0 lets it share the first
+            evaluator's reservation (the trial loop and its evaluators take turns).
+        checkpoint_every: iterations between checkpoints, >= 1.
+        max_concurrent_trials: trials in flight at once; 0 = as many as the cluster fits.
+        max_retries: Ray retries of a trial after a node or worker failure, >= 0.
+        experiment: MLflow experiment name.
+        tracking_uri: MLflow tracking URI; "" = the embedded store (or MLFLOW_TRACKING_URI).
+        work_dir: folder for trial checkpoints; "" = next to the embedded store.
+    """
+
+    trials: int = 10
+    approaches: tuple[str, ...] = APPROACHES
+    fitnesses: tuple[str, ...] = ("Fp", "Fsl")
+    evaluations: int = 725_000
+    batch_size: int = 5000
+    mode: str = "paper"
+    seed: int = 0
+    target: str = "D16"
+    n_angles: int = 40
+    max_seconds: float | None = None
+    options: dict[str, Any] = field(default_factory=dict)
+    evaluators_per_trial: int = 1
+    cpus_per_evaluator: float = 1.0
+    trial_cpus: float = 0.0
+    checkpoint_every: int = 10
+    max_concurrent_trials: int = 0
+    max_retries: int = 3
+    experiment: str = "linkevo"
+    tracking_uri: str = ""
+    work_dir: str = ""
+
+    def __post_init__(self) -> None:
+        _validate(self)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Returns the config as plain TOML/JSON-able values (lists, not tuples)."""
+        out = asdict(self)
+        for key, value in out.items():
+            if isinstance(value, tuple):
+                out[key] = list(value)
+        if out["max_seconds"] is None:
+            del out["max_seconds"]
+        return out
+
+    def identity(self) -> dict[str, Any]:
+        """Returns the keys that determine the grid's results (what the grid id hashes)."""
+        return {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS}
+
+    def per_trial_cpus(self) -> float:
+        """Returns the CPUs one trial reserves: its own plus its evaluators'."""
+        return self.trial_cpus + self.evaluators_per_trial * self.cpus_per_evaluator
+
+
+KEYS: tuple[str, ...] = tuple(f.name for f in fields(GridConfig))
+FLOAT_KEYS: tuple[str, ...] = ("max_seconds", "cpus_per_evaluator", "trial_cpus")
+"""Keys read as floats when the TOML gives an integer (`trial_cpus = 0`)."""
+
+
+def _fail(key: str, value: object, allowed: str) -> ConfigError:
+    return ConfigError(f"config key '{key}' = {value!r} is invalid: {allowed}")
+
+
+def _check_int(cfg: GridConfig, key: str, minimum: int) -> None:
+    value = getattr(cfg, key)
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise _fail(key, value, f"allowed: an integer >= {minimum}")
+
+
+def _check_number(cfg: GridConfig, key: str, minimum: float, strict: bool) -> None:
+    value = getattr(cfg, key)
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    if not ok or value < minimum or (strict and value == minimum):
+        bound = f"> {minimum}" if strict else f">= {minimum}"
+        raise _fail(key, value, f"allowed: a number {bound}")
+
+
+def _check_choices(cfg: GridConfig, key: str, allowed: tuple[str, ...], many: bool) -> None:
+    value = getattr(cfg, key)
+    items = value if many else (value,)
+    if many and (not isinstance(value, tuple) or not value):
+        raise _fail(key, value, f"allowed: a non-empty list drawn from {list(allowed)}")
+    for item in items:
+        if item not in allowed:
+            raise _fail(key, item, f"allowed values: {', '.join(allowed)}")
+    if many and len(set(items)) != len(items):
+        raise _fail(key, list(value), "each value may appear only once")
+
+
+def _validate(cfg: GridConfig) -> None:
+    for key in ("trials", "evaluations", "batch_size", "checkpoint_every"):
+        _check_int(cfg, key, 1)
+    _check_int(cfg, "n_angles", 3)
+    _check_int(cfg, "evaluators_per_trial", 1)
+    for key in ("seed", "max_concurrent_trials", "max_retries"):
+        _check_int(cfg, key, 0)
+    _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)
+    _check_number(cfg, "trial_cpus", 0.0, strict=False)
+    if cfg.max_seconds is not None:
+        _check_number(cfg, "max_seconds", 0.0, strict=True)
+    _check_choices(cfg, "approaches", APPROACHES, many=True)
+    _check_choices(cfg, "fitnesses", SINGLE_FITNESSES, many=True)
+    _check_choices(cfg, "mode", MODES, many=False)
+    _check_choices(cfg, "target", TARGETS, many=False)
+    for key in ("experiment", "tracking_uri", "work_dir"):
+        if not isinstance(getattr(cfg, key), str):
+            raise _fail(key, getattr(cfg, key), "allowed: a string")
+    if not cfg.experiment:
+        raise _fail("experiment", cfg.experiment, "allowed: a non-empty name")
+    if not isinstance(cfg.options, dict):
+        raise _fail("options", cfg.options, "allowed: a table of per-approach option tables")
+    for approach, table in cfg.options.items():
+        if approach not in APPROACHES:
+            raise _fail(f"options.{approach}", table, f"allowed tables: {', '.join(APPROACHES)}")
+        if not isinstance(table, dict):
+            raise _fail(f"options.{approach}", table, "allowed: a table of option = value")
+
+
+def from_dict(data: dict[str, Any], source: str = "config") -> GridConfig:
+    """Returns the GridConfig of a parsed TOML table; every key not given takes its default.
+
+    Raises:
+        ConfigError: naming an unknown key (with the closest known one) or a bad value.
+    """
+    unknown = [k for k in data if k not in KEYS]
+    if unknown:
+        key = unknown[0]
+        close = difflib.get_close_matches(key, KEYS, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        raise ConfigError(f"{source}: unknown key '{key}'{hint}; allowed keys: {', '.join(KEYS)}")
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
+    for key in FLOAT_KEYS:
+        value = values.get(key)
+        if isinstance(value, int) and not isinstance(value, bool):
+            values[key] = float(value)
+    return GridConfig(**values)
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """Returns the dotted key path and TOML value of one `--set key=value` override.
+
+    The value is read as a TOML value (`3`, `"EA"`, `["EA","MAP-LIS"]`, `true`); a bare
+    word that is not valid TOML (`legacy`) is taken as a string.
+    """
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"--set {text!r}: expected KEY=VALUE, e.g. --set trials=3")
+    raw = raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError as exc:
+        if not raw or any(c in raw for c in "[]{}\"'=,"):
+            raise ConfigError(f"--set {text!r}: the value is not a TOML value ({exc})") from exc
+        value = raw
+    return key.split("."), value
+
+
+def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Returns a copy of the TOML table with every `--set key=value` applied in order."""
+    out = dict(data)
+    if isinstance(out.get("options"), dict):
+        out["options"] = {
+            k: dict(v) if isinstance(v, dict) else v for k, v in out["options"].items()
+        }
+    for text in overrides:
+        path, value = parse_override(text)
+        if len(path) == 1:
+            out[path[0]] = value
+        elif len(path) == 3 and path[0] == "options":
+            tables = out.setdefault("options", {})
+            tables[path[1]] = {**tables.get(path[1], {}), path[2]: value}
+        else:
+            raise ConfigError(
+                f"--set {text!r}: only 'options.<approach>.<name>' may be dotted; "
+                "allowed keys: " + ", ".join(KEYS)
+            )
+    return out
+
+
+def load(path: Path | str, overrides: list[str] | None = None) -> GridConfig:
+    """Returns the GridConfig read from a TOML file with `--set` overrides applied.
+
+    Raises:
+        ConfigError: the file is missing or malformed TOML, or a key or value is bad.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigError(f"cannot read config file {str(path)!r}: {exc.strerror}") from exc
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{path}: malformed TOML: {exc}") from exc
+    return from_dict(apply_overrides(data, overrides or []), source=str(path))
+
+
+def flatten(data: dict[str, Any], prefix: str = "") -> dict[str, str]:
+    """Returns `{"key": str(value)}` with nested tables as dotted keys (MLflow params)."""
+    out: dict[str, str] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = str(value)
+    return out
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        escaped = value.replace("\\", "\\\\").replace('"', '\\"')
+        return f'"{escaped}"'
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml_value(v)}" for k, v in value.items()) + " }"
+    raise TypeError(f"cannot write {value!r} as a TOML value")
+
+
+def to_toml(cfg: GridConfig) -> str:
+    """Returns the resolved config as TOML text that `load` reads back to an equal config."""
+    data = cfg.to_dict()
+    options = data.pop("options")
+    lines = [f"{key} = {_toml_value(value)}" for key, value in data.items()]
+    for approach, table in options.items():
+        lines += ["", f'[options."{approach}"]']
+        lines += [f"{key} = {_toml_value(value)}" for key, value in table.items()]
+    return "\n".join(lines) + "\n"

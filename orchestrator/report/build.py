@@ -1,0 +1,160 @@
+"""Provides `build_report`: a grid's figures, tables, findings and HTML, logged to MLflow."""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from orchestrator.report import figures as fig
+from orchestrator.report.findings import Finding, check_findings
+from orchestrator.report.html import render_html
+from orchestrator.report.load import GridData, load_grid
+from orchestrator.report.stats import pairwise_tests, summary_table
+
+REPORT_ARTIFACT_DIR = "report"
+"""Where the report lands among the grid parent run's artefacts."""
+PNG_DPI = 150
+TRIAL_COLUMNS: tuple[str, ...] = (
+    "trial_key",
+    "approach",
+    "fitness",
+    "trial_index",
+    "seed",
+    "run_id",
+    "status",
+    "error",
+    "best_loss",
+    "final_evaluations",
+)
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """What `build_report` produced.
+
+    Attributes:
+        grid_id: the grid reported on.
+        parent_run_id: the grid's parent run (the report is logged there when asked).
+        out_dir: the folder holding every file.
+        html: the self-contained report page.
+        files: every file written, in order.
+        summary: `stats.summary_table` of the grid.
+        tests: `stats.pairwise_tests` of the grid.
+        findings: the study's findings checked on the grid.
+    """
+
+    grid_id: str
+    parent_run_id: str
+    out_dir: Path
+    html: Path
+    files: tuple[Path, ...]
+    summary: pd.DataFrame
+    tests: pd.DataFrame
+    findings: tuple[Finding, ...]
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Writes `data` to `path` through a temporary file in the same folder."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            os.fchmod(handle.fileno(), 0o644)  # mkstemp makes 0600; reports are for sharing
+            handle.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _render(figure, fmt: str) -> bytes:
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format=fmt, dpi=PNG_DPI)
+    return buffer.getvalue()
+
+
+def report_figures(grid: GridData) -> list[fig.ReportFigure]:
+    """Returns every figure the grid supports, in report order."""
+    made = [fig.best_loss_figure(grid), fig.repertoire_maps_figure(grid)]
+    made += [fig.path_maps_figure(grid, fitness) for fitness in grid.fitnesses()]
+    made.append(fig.convergence_figure(grid))
+    return [f for f in made if f is not None]
+
+
+def build_report(
+    tracking_uri: str,
+    grid_id: str | None,
+    out_dir: Path | None = None,
+    *,
+    experiment: str = "linkevo",
+    log_to_mlflow: bool = True,
+) -> ReportResult:
+    """Returns the report of one grid (None: the latest), written to `out_dir`.
+
+    Writes `<name>.png` and `<name>.pdf` per figure, `trials.csv`, `best_loss_summary.csv`,
+    `pairwise_tests.csv`, `findings.csv` and `report.html`, and logs them all under
+    `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
+    """
+    with tempfile.TemporaryDirectory(prefix="linkevo-report-") as cache:
+        grid = load_grid(tracking_uri, grid_id, Path(cache), experiment)
+        out = Path(out_dir) if out_dir is not None else Path("reports") / grid.grid_id
+        out.mkdir(parents=True, exist_ok=True)
+        summary = summary_table(grid.trials)
+        tests = pairwise_tests(grid.trials)
+        findings = tuple(check_findings(grid, tests))
+        made = report_figures(grid)
+    files: list[Path] = []
+    embedded = []
+    for item in made:
+        png = _render(item.figure, "png")
+        # The PNG pass placed every axes; keep those positions for the PDF (one layout).
+        item.figure.set_layout_engine("none")
+        for suffix, data in ((".png", png), (".pdf", _render(item.figure, "pdf"))):
+            path = out / f"{item.name}{suffix}"
+            write_atomic(path, data)
+            files.append(path)
+        embedded.append((item.title, item.caption, png))
+    trials = grid.trials.reindex(columns=list(TRIAL_COLUMNS))
+    tables = {
+        "trials.csv": trials,
+        "best_loss_summary.csv": summary,
+        "pairwise_tests.csv": tests,
+        "findings.csv": pd.DataFrame([f.__dict__ for f in findings]),
+    }
+    for name, table in tables.items():
+        path = out / name
+        write_atomic(path, table.to_csv(index=False).encode())
+        files.append(path)
+    page = render_html(
+        grid_id=grid.grid_id,
+        parent_run_id=grid.parent_run_id,
+        tracking_uri=tracking_uri,
+        figures=embedded,
+        summary=summary,
+        tests=tests,
+        trials=trials,
+        findings=findings,
+    )
+    html_path = out / "report.html"
+    write_atomic(html_path, page.encode("utf-8"))
+    files.append(html_path)
+    if log_to_mlflow:
+        from mlflow.tracking import MlflowClient
+
+        client = MlflowClient(tracking_uri=tracking_uri)
+        for path in files:
+            client.log_artifact(grid.parent_run_id, str(path), REPORT_ARTIFACT_DIR)
+    return ReportResult(
+        grid_id=grid.grid_id,
+        parent_run_id=grid.parent_run_id,
+        out_dir=out,
+        html=html_path,
+        files=tuple(files),
+        summary=summary,
+        tests=tests,
+        findings=findings,
+    )

@@ -1,0 +1,440 @@
+"""Provides the report's figures: best-loss boxes, repertoire maps, path maps, convergence."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from matplotlib.collections import LineCollection
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+
+from algorithms.pareto import non_dominated_ranks
+from orchestrator.report.load import GridData, read_archive, read_archives
+from sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+
+DOWNSAMPLED = 5
+"""Side of the downsampled path maps (5 × 5 cells, as in the study)."""
+STRIP_PATHS = 5
+"""Paths shown for EA (best of the final population) and NSGA-II (along the front)."""
+CONVERGENCE_METRICS: tuple[tuple[str, str], ...] = (
+    ("best_loss", "best loss"),
+    ("coverage", "coverage"),
+    ("qd_score", "QD-score"),
+)
+LOSS_CMAP = "viridis"
+CLIP_QUANTILE = 0.95
+"""Loss colour scales end at this quantile of the losses shown."""
+MAX_DIMS = 4
+"""The most descriptor dimensions a map has (bin_0..bin_3)."""
+
+
+@dataclass(frozen=True)
+class ReportFigure:
+    """One figure of the report.
+
+    Attributes:
+        name: file stem, e.g. "best_loss" (written as best_loss.png and best_loss.pdf).
+        title: heading in the HTML report.
+        caption: what the figure shows and how it was made.
+        figure: the matplotlib figure.
+    """
+
+    name: str
+    title: str
+    caption: str
+    figure: Figure
+
+
+def label(name: str) -> str:
+    """Returns the display label of an approach or fitness ("NSGA2" -> "NSGA-II")."""
+    return {"NSGA2": "NSGA-II", "Fp": "F_p", "Fsl": "F_sl"}.get(name, name)
+
+
+def is_map_elites(approach: str) -> bool:
+    """Returns True for the MAP-Elites approaches (the ones with a repertoire)."""
+    return approach.startswith("MAP-")
+
+
+def is_pareto(approach: str) -> bool:
+    """Returns True for the multi-objective approach (NSGA-II)."""
+    return approach in ("NSGA-II", "NSGA2")
+
+
+def loss_norm(losses: np.ndarray) -> Normalize:
+    """Returns a colour scale from the lowest loss to the 95th percentile of `losses` (n,).
+
+    A few very poor linkages would otherwise take most of the scale; losses above the
+    percentile share the top colour (the colour bar shows an arrow).
+    """
+    if losses.size == 0:
+        return Normalize(0.0, 1.0)
+    low, high = float(losses.min()), float(np.quantile(losses, CLIP_QUANTILE))
+    return Normalize(low, high if high > low else low + 1.0)
+
+
+def fold_bins(bins: np.ndarray, resolution: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Returns (rows (N,), cols (N,), side) placing D-dimensional bins on a 2-D image.
+
+    2-D bins (b0, b1) map to row b0, column b1. 4-D bins (b0, b1, b2, b3) fold to
+    row = b0 * R + b2, column = b1 * R + b3: b0 and b1 choose an R × R block (outer axes),
+    b2 and b3 the cell inside it (inner axes), so R = 10 gives a 100 × 100 image.
+
+    Args:
+        bins: (N, D) int bins, D in {2, 4}.
+        resolution: R, bins per dimension.
+    """
+    bins = np.asarray(bins, dtype=np.int64)
+    if bins.shape[1] == 2:
+        return bins[:, 0], bins[:, 1], resolution
+    if bins.shape[1] == 4:
+        rows = bins[:, 0] * resolution + bins[:, 2]
+        cols = bins[:, 1] * resolution + bins[:, 3]
+        return rows, cols, resolution * resolution
+    raise ValueError(f"can fold 2-D or 4-D bins only, got {bins.shape[1]}-D")
+
+
+def _space(approach: str, dims: int) -> DescriptorSpace:
+    """Returns the approach's descriptor space (a generic one for an unknown approach)."""
+    space = DESCRIPTOR_SPACES.get(approach)
+    if space is not None and space.dims == dims:
+        return space
+    side = round(10_000 ** (1 / dims))
+    return DescriptorSpace(tuple(f"d{i}" for i in range(dims)), side, (1.0,) * dims)
+
+
+def _bin_columns(columns: pd.Index | list[str]) -> list[str]:
+    """Returns the archive's bin columns bin_0, bin_1, ... in order."""
+    found = [c for c in columns if c.startswith("bin_")]
+    return sorted(found, key=lambda c: int(c.removeprefix("bin_")))
+
+
+def merged_repertoire(grid: GridData, approach: str, fitness: str) -> pd.DataFrame:
+    """Returns the best loss per cell over all finished trials of one MAP-Elites cell.
+
+    Returns:
+        Columns bin_0..bin_{D-1}, loss; one row per filled cell.
+    """
+    trials = grid.finished()
+    paths = trials.archive[(trials.approach == approach) & (trials.fitness == fitness)].dropna()
+    if paths.empty:
+        return pd.DataFrame(columns=["loss"])
+    columns = ["cell", "loss", *(f"bin_{d}" for d in range(MAX_DIMS))]
+    frames = [
+        frame[(frame.cell >= 0) & np.isfinite(frame.loss)].drop(columns="cell")
+        for frame in read_archives(paths, columns)
+    ]
+    merged = pd.concat(frames, ignore_index=True)
+    bins = _bin_columns(merged.columns)
+    return merged.groupby(bins, as_index=False)["loss"].min()
+
+
+def _trial_count(grid: GridData, approach: str, fitness: str) -> str:
+    """Returns "k of n trials" for a cell, naming failed and missing ones."""
+    cell = grid.trials[(grid.trials.approach == approach) & (grid.trials.fitness == fitness)]
+    done = int(((cell.status == "FINISHED") & cell.best_loss.notna()).sum())
+    text = f"{done} of {len(cell)} trials"
+    failed = int((cell.status != "FINISHED").sum())
+    return text if failed == 0 else f"{text}; {failed} failed or missing"
+
+
+def best_loss_figure(grid: GridData) -> ReportFigure:
+    """Returns box plots of the best loss per trial, one panel per fitness."""
+    fitnesses, approaches = grid.fitnesses(), grid.approaches()
+    fig = Figure(figsize=(4.2 * len(fitnesses), 4.0), layout="constrained")
+    axes = fig.subplots(1, len(fitnesses), squeeze=False)[0]
+    rng = np.random.default_rng(0)
+    done = grid.finished()
+    for ax, fitness in zip(axes, fitnesses, strict=True):
+        data = [
+            done.best_loss[(done.approach == a) & (done.fitness == fitness)].to_numpy()
+            for a in approaches
+        ]
+        positions = np.arange(1, len(approaches) + 1)
+        filled = [i for i, d in enumerate(data) if d.size]
+        if filled:
+            ax.boxplot(
+                [data[i] for i in filled],
+                positions=positions[filled],
+                widths=0.6,
+                showfliers=False,
+                medianprops={"color": "black"},
+            )
+        for i, (pos, values) in enumerate(zip(positions, data, strict=True)):
+            jitter = rng.uniform(-0.15, 0.15, values.size)
+            ax.scatter(pos + jitter, values, s=12, alpha=0.7, zorder=3, color=f"C{i}")
+        ticks = []
+        for approach, values in zip(approaches, data, strict=True):
+            cell = grid.trials[
+                (grid.trials.approach == approach) & (grid.trials.fitness == fitness)
+            ]
+            lost = int(len(cell) - values.size)
+            ticks.append(
+                f"{label(approach)}\nn={values.size}" + (f"\n{lost} not finished" if lost else "")
+            )
+        ax.set_xticks(positions, ticks, fontsize=7)
+        ax.set_xlim(0.4, len(approaches) + 0.6)
+        ax.set_title(label(fitness))
+        ax.set_ylabel("best loss")
+        ax.grid(axis="y", alpha=0.3)
+    return ReportFigure(
+        name="best_loss",
+        title="Best loss per trial",
+        caption=(
+            "Distribution of the best loss found in each finished trial, per approach and "
+            "fitness (box: quartiles, whiskers: 1.5 IQR, points: trials). n counts finished "
+            "trials; failed, killed or missing trials are named under the approach."
+        ),
+        figure=fig,
+    )
+
+
+def _nested_axis(ax, axis: str, space: DescriptorSpace, outer: int, inner: int) -> None:
+    """Labels one axis of a folded 4-D map: outer bins as ticks, inner in the label."""
+    r = space.resolution
+    centres = np.arange(r) * r + (r - 1) / 2
+    set_ticks = ax.set_xticks if axis == "x" else ax.set_yticks
+    set_ticks(centres, [str(i) for i in range(r)], fontsize=6)
+    edges = np.arange(1, r) * r - 0.5
+    lines = ax.vlines if axis == "x" else ax.hlines
+    lines(edges, -0.5, r * r - 0.5, color="0.8", lw=0.4)
+    text = f"{space.names[outer]} (outer bins) › {space.names[inner]} (inner, 0–{r - 1})"
+    (ax.set_xlabel if axis == "x" else ax.set_ylabel)(text, fontsize=7)
+
+
+def _folded_map(grid: GridData, approach: str, fitness: str) -> tuple[np.ndarray, DescriptorSpace]:
+    """Returns (image (side, side) of best loss per cell, NaN where empty; the space)."""
+    merged = merged_repertoire(grid, approach, fitness)
+    bins = _bin_columns(merged.columns)
+    space = _space(approach, len(bins) or DESCRIPTOR_SPACES[approach].dims)
+    side = space.resolution if space.dims == 2 else space.resolution**2
+    image = np.full((side, side), np.nan)
+    if len(merged):
+        rows, cols, _ = fold_bins(merged[bins].to_numpy(), space.resolution)
+        image[rows, cols] = merged.loss.to_numpy()
+    return image, space
+
+
+def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
+    """Returns the best loss per cell over all trials, per MAP-Elites approach and fitness.
+
+    None when the grid holds no MAP-Elites approach.
+    """
+    approaches = [a for a in grid.approaches() if is_map_elites(a)]
+    if not approaches:
+        return None
+    fitnesses = grid.fitnesses()
+    fig = Figure(figsize=(3.4 * len(approaches) + 1.0, 3.4 * len(fitnesses)), layout="constrained")
+    axes = fig.subplots(len(fitnesses), len(approaches), squeeze=False)
+    for row, fitness in enumerate(fitnesses):
+        images = [_folded_map(grid, approach, fitness) for approach in approaches]
+        finite = np.concatenate([image[np.isfinite(image)] for image, _ in images])
+        norm = loss_norm(finite)
+        for col, (approach, (image, space)) in enumerate(zip(approaches, images, strict=True)):
+            ax = axes[row, col]
+            shown = ax.imshow(
+                np.ma.masked_invalid(image),
+                origin="lower",
+                cmap=LOSS_CMAP,
+                norm=norm,
+                interpolation="nearest",
+                aspect="equal",
+            )
+            ax.set_title(
+                f"{label(approach)}, {label(fitness)}: {int(np.isfinite(image).sum())} cells "
+                f"filled\n{_trial_count(grid, approach, fitness)}",
+                fontsize=8,
+            )
+            if space.dims == 4:
+                _nested_axis(ax, "y", space, 0, 2)
+                _nested_axis(ax, "x", space, 1, 3)
+            else:
+                ax.set_ylabel(f"{space.names[0]} (bin)", fontsize=7)
+                ax.set_xlabel(f"{space.names[1]} (bin)", fontsize=7)
+                ax.tick_params(labelsize=6)
+        fig.colorbar(shown, ax=axes[row, :].tolist(), shrink=0.8, label="best loss", extend="max")
+    return ReportFigure(
+        name="repertoire_maps",
+        title="Repertoire maps",
+        caption=(
+            "Best loss found in each cell over all finished trials of each MAP-Elites "
+            "approach; blank cells were never filled. 4-D maps are folded to 100 × 100: "
+            "row = b0·10 + b2, column = b1·10 + b3, so tick labels give the outer bins and "
+            "each 10 × 10 block spans the inner pair."
+        ),
+        figure=fig,
+    )
+
+
+def _best_trial(grid: GridData, approach: str, fitness: str) -> pd.Series | None:
+    """Returns the finished trial with the lowest best loss of a cell, or None."""
+    done = grid.finished()
+    cell = done[(done.approach == approach) & (done.fitness == fitness) & done.archive.notna()]
+    if cell.empty:
+        return None
+    return cell.loc[cell.best_loss.idxmin()]
+
+
+def select_paths(archive: pd.DataFrame, approach: str) -> pd.DataFrame:
+    """Returns the archive rows to draw, with their grid position.
+
+    MAP-Elites: the best row in each cell of the repertoire downsampled to 5 × 5 (folded
+    4-D maps are downsampled after folding). NSGA-II: 5 rows evenly spaced along the
+    final Pareto front, ordered by the first objective. EA: the 5 lowest losses.
+
+    Returns:
+        The chosen rows plus columns row, col (grid position, row 0 at the bottom).
+    """
+    valid = archive[archive.foot_x.map(lambda v: np.isfinite(np.asarray(v)).any())]
+    if is_map_elites(approach):
+        bins = _bin_columns(valid.columns)
+        space = _space(approach, len(bins))
+        valid = valid[valid.cell >= 0]
+        rows, cols, side = fold_bins(valid[bins].to_numpy(), space.resolution)
+        block = side // DOWNSAMPLED
+        picked = valid.assign(row=rows // block, col=cols // block)
+        best = picked.sort_values("loss").drop_duplicates(["row", "col"])
+        return best.reset_index(drop=True)
+    if is_pareto(approach):
+        losses = valid[["loss_0", "loss_1"]].to_numpy()
+        front = valid[non_dominated_ranks(losses) == 0].sort_values(["loss_0", "loss_1"])
+        front = front.drop_duplicates(["loss_0", "loss_1"])
+        take = np.unique(np.linspace(0, len(front) - 1, min(STRIP_PATHS, len(front))).round())
+        chosen = front.iloc[take.astype(int)]
+    else:
+        chosen = valid.nsmallest(STRIP_PATHS, "loss")
+    return chosen.assign(row=0, col=np.arange(len(chosen))).reset_index(drop=True)
+
+
+def _draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize):
+    """Draws each chosen path scaled into its grid cell, with its size in the corner.
+
+    Returns the paths' LineCollection (coloured by loss under `norm`).
+    """
+    segments = []
+    for foot_x, foot_y, row, col in zip(
+        chosen.foot_x, chosen.foot_y, chosen.row, chosen.col, strict=True
+    ):
+        x, y = np.asarray(foot_x, dtype=float), np.asarray(foot_y, dtype=float)
+        keep = np.isfinite(x) & np.isfinite(y)
+        x, y = np.append(x[keep], x[keep][0]), np.append(y[keep], y[keep][0])
+        size = max(np.ptp(x), np.ptp(y))
+        scale = 0.8 / size if size > 0 else 1.0
+        cx, cy = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
+        segments.append(
+            np.column_stack([col + 0.5 + (x - cx) * scale, row + 0.5 + (y - cy) * scale])
+        )
+        ax.text(col + 0.96, row + 0.04, f"{size:.1f}", ha="right", va="bottom", fontsize=5)
+    lines = LineCollection(segments, cmap=LOSS_CMAP, norm=norm, linewidths=0.9)
+    lines.set_array(chosen.loss.to_numpy(dtype=float))
+    ax.add_collection(lines)
+    rows, cols = shape
+    ax.vlines(np.arange(1, cols), 0, rows, color="0.85", lw=0.5)
+    ax.hlines(np.arange(1, rows), 0, cols, color="0.85", lw=0.5)
+    ax.set_xlim(0, cols)
+    ax.set_ylim(0, rows)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_aspect("equal")
+    return lines
+
+
+def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
+    """Returns example paths of every approach for one fitness (None when none finished).
+
+    Each approach shows its best trial (lowest best loss): MAP-Elites as a 5 × 5 map on
+    the top row, NSGA-II and EA as strips of 5 paths below. Paths are scaled to fit their
+    cell; the number in the corner is the path's size (the larger of its width and height,
+    in units); one colour scale (the single-objective loss) serves the whole figure.
+    """
+    panels = []
+    for approach in grid.approaches():
+        trial = _best_trial(grid, approach, fitness)
+        if trial is None:
+            continue
+        columns = ["cell", "loss", "loss_0", "loss_1", "foot_x", "foot_y"]
+        columns += [f"bin_{d}" for d in range(MAX_DIMS)]
+        chosen = select_paths(read_archive(trial.archive, columns), approach)
+        if len(chosen):
+            panels.append((approach, trial, chosen))
+    if not panels:
+        return None
+    maps = [p for p in panels if is_map_elites(p[0])]
+    strips = [p for p in panels if not is_map_elites(p[0])]
+    groups = [g for g in (maps, strips) if g]
+    ncols = max(len(g) for g in groups)
+    heights = [5.0] * bool(maps) + [1.4] * bool(strips)
+    fig = Figure(figsize=(3.3 * ncols + 0.8, 0.62 * sum(heights) + 0.6), layout="constrained")
+    axes = fig.subplots(len(groups), ncols, squeeze=False, height_ratios=heights)
+    losses = np.concatenate([c.loss.to_numpy(dtype=float) for _, _, c in panels])
+    norm = loss_norm(losses)
+    lines = None
+    for row, group in enumerate(groups):
+        for col in range(ncols):
+            ax = axes[row, col]
+            if col >= len(group):
+                ax.set_axis_off()
+                continue
+            approach, trial, chosen = group[col]
+            strip = not is_map_elites(approach)
+            shape = (1, STRIP_PATHS) if strip else (DOWNSAMPLED, DOWNSAMPLED)
+            lines = _draw_paths(ax, chosen, shape, norm)
+            ax.set_title(f"{label(approach)}, {label(fitness)}: {trial.trial_key}", fontsize=8)
+    fig.colorbar(lines, ax=axes.ravel().tolist(), shrink=0.6, label="loss", extend="max")
+    return ReportFigure(
+        name=f"paths_{fitness}",
+        title=f"Example paths, {label(fitness)}",
+        caption=(
+            "Foot paths from each approach's best trial. MAP-Elites: the repertoire "
+            "downsampled to 5 × 5 with the best path of each region; NSGA-II: 5 paths "
+            "evenly spaced along the final Pareto front; EA: the 5 best paths of the final "
+            "population. Each path is scaled to fit its cell; the corner number is its "
+            "size (the larger of width and height, in LEGO units); colour is the "
+            "single-objective loss."
+        ),
+        figure=fig,
+    )
+
+
+def convergence_figure(grid: GridData) -> ReportFigure | None:
+    """Returns best loss, coverage and QD-score against evaluations, median and IQR band.
+
+    Rows are fitness functions; finished trials only. None when no history was logged.
+    """
+    history = grid.history[grid.history.status == "FINISHED"]
+    metrics = [(m, name) for m, name in CONVERGENCE_METRICS if history[m].notna().any()]
+    if history.empty or not metrics:
+        return None
+    fitnesses = grid.fitnesses()
+    fig = Figure(figsize=(4.0 * len(metrics), 3.2 * len(fitnesses)), layout="constrained")
+    axes = fig.subplots(len(fitnesses), len(metrics), squeeze=False)
+    for row, fitness in enumerate(fitnesses):
+        for col, (metric, name) in enumerate(metrics):
+            ax = axes[row, col]
+            for i, approach in enumerate(grid.approaches()):
+                part = history[(history.fitness == fitness) & (history.approach == approach)]
+                part = part[part[metric].notna()]
+                if part.empty:
+                    continue
+                by_step = part.groupby("iteration")
+                x = by_step.evaluations.median()
+                q = by_step[metric].quantile([0.25, 0.5, 0.75]).unstack()
+                ax.plot(x, q[0.5], lw=1.2, label=label(approach), color=f"C{i}")
+                ax.fill_between(x, q[0.25], q[0.75], color=f"C{i}", alpha=0.2, lw=0)
+            ax.set_title(f"{name}, {label(fitness)}", fontsize=9)
+            ax.set_xlabel("evaluations")
+            ax.set_ylabel(name)
+            ax.grid(alpha=0.3)
+            if ax.lines:
+                ax.legend(fontsize=6)
+    return ReportFigure(
+        name="convergence",
+        title="Convergence",
+        caption=(
+            "Median (line) and inter-quartile band over finished trials of the best loss, "
+            "the repertoire coverage and the QD-score against evaluations, per approach "
+            "(approaches without a repertoire have no coverage or QD-score)."
+        ),
+        figure=fig,
+    )

@@ -1,0 +1,166 @@
+"""Provides `check_findings`: the study's qualitative findings tested on one grid."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from orchestrator.report.figures import is_map_elites, is_pareto, label
+from orchestrator.report.load import GridData, read_archives
+from orchestrator.report.stats import ALPHA
+
+REPRODUCED = "reproduced"
+NOT_REPRODUCED = "not reproduced"
+NOT_TESTABLE = "not testable"
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One claim of the study and what this grid says about it.
+
+    Attributes:
+        claim: the study's claim, in words.
+        rule: the test applied to this grid.
+        verdict: REPRODUCED, NOT_REPRODUCED or NOT_TESTABLE.
+        evidence: the numbers behind the verdict.
+    """
+
+    claim: str
+    rule: str
+    verdict: str
+    evidence: str
+
+
+def _pair(tests: pd.DataFrame, fitness: str, a: str, b: str) -> pd.Series | None:
+    """Returns the test row comparing approaches a and b under `fitness`, a first."""
+    rows = tests[(tests.fitness == fitness)]
+    hit = rows[(rows.approach_a == a) & (rows.approach_b == b)]
+    if len(hit):
+        return hit.iloc[0]
+    hit = rows[(rows.approach_a == b) & (rows.approach_b == a)]
+    if not len(hit):
+        return None
+    row = hit.iloc[0].copy()
+    row["approach_a"], row["approach_b"] = a, b
+    row["median_a"], row["median_b"] = row.median_b, row.median_a
+    row["a12"] = 1.0 - row.a12
+    return row
+
+
+def _describe(row: pd.Series) -> str:
+    return (
+        f"{label(row.approach_a)} median {row.median_a:.4g} vs {label(row.approach_b)} "
+        f"{row.median_b:.4g} (A12 {row.a12:.2f}, Holm p {row.p_holm:.3g})"
+    )
+
+
+def _map_versus(
+    tests: pd.DataFrame, fitness: str, maps: list[str], other: str, significant: bool
+) -> tuple[str, str]:
+    """Returns (verdict, evidence) for "every MAP-Elites approach beats `other`".
+
+    Beating means a lower median best loss; with `significant` also a Holm-corrected
+    Mann–Whitney p below ALPHA.
+    """
+    rows = [_pair(tests, fitness, m, other) for m in maps]
+    rows = [r for r in rows if r is not None]
+    if not rows:
+        return NOT_TESTABLE, f"no finished MAP-Elites and {label(other)} trials with {fitness}"
+    wins = [r.median_a < r.median_b and (not significant or bool(r.p_holm < ALPHA)) for r in rows]
+    verdict = REPRODUCED if all(wins) else NOT_REPRODUCED
+    return verdict, "; ".join(_describe(r) for r in rows)
+
+
+def best_path_sizes(grid: GridData) -> pd.DataFrame:
+    """Returns the size of each finished trial's best path (max of width and height).
+
+    Returns:
+        Columns trial_key, approach, fitness, size.
+    """
+    trials = grid.finished()
+    trials = trials[trials.archive.notna()]
+    archives = read_archives(trials.archive, ["loss", "foot_x", "foot_y"])
+    rows = []
+    for trial, archive in zip(trials.itertuples(), archives, strict=True):
+        best = archive.loc[archive.loss.idxmin()]
+        x, y = np.asarray(best.foot_x, dtype=float), np.asarray(best.foot_y, dtype=float)
+        if np.isfinite(x).any():
+            size = max(np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y))
+            rows.append((trial.trial_key, trial.approach, trial.fitness, float(size)))
+    return pd.DataFrame(rows, columns=["trial_key", "approach", "fitness", "size"])
+
+
+def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
+    """Returns the study's findings, each checked on this grid's finished trials.
+
+    Args:
+        grid: the loaded grid.
+        tests: `stats.pairwise_tests` of the grid.
+    """
+    approaches = grid.approaches()
+    maps = [a for a in approaches if is_map_elites(a)]
+    nsga = next((a for a in approaches if is_pareto(a)), "NSGA-II")
+    findings = []
+
+    verdict, evidence = _map_versus(tests, "Fp", maps, "EA", significant=True)
+    findings.append(
+        Finding(
+            claim="With F_p, the MAP-Elites approaches beat the EA.",
+            rule=(
+                "every MAP-Elites approach has a lower median best loss than EA and a "
+                f"Holm-corrected Mann–Whitney p < {ALPHA}"
+            ),
+            verdict=verdict,
+            evidence=evidence,
+        )
+    )
+    verdict, evidence = _map_versus(tests, "Fp", maps, nsga, significant=False)
+    findings.append(
+        Finding(
+            claim="With F_p, the MAP-Elites approaches slightly beat NSGA-II.",
+            rule="every MAP-Elites approach has a lower median best loss than NSGA-II",
+            verdict=verdict,
+            evidence=evidence,
+        )
+    )
+    fsl = tests[tests.fitness == "Fsl"]
+    if fsl.empty:
+        verdict, evidence = NOT_TESTABLE, "fewer than two approaches finished with Fsl"
+    else:
+        differing = fsl[fsl.significant]
+        verdict = REPRODUCED if differing.empty else NOT_REPRODUCED
+        shown = differing if len(differing) else fsl.loc[[fsl.p_holm.idxmin()]]
+        evidence = f"{len(differing)} of {len(fsl)} pairs differ; " + "; ".join(
+            _describe(r) for r in shown.itertuples(index=False)
+        )
+    findings.append(
+        Finding(
+            claim="With F_sl, all approaches perform similarly.",
+            rule=f"no pair of approaches differs (every Holm-corrected p >= {ALPHA})",
+            verdict=verdict,
+            evidence=evidence,
+        )
+    )
+    findings.append(_oversized(grid))
+    return findings
+
+
+def _oversized(grid: GridData) -> Finding:
+    """Returns the check of "F_sl tends to evolve oversized linkages" via best-path sizes."""
+    sizes = best_path_sizes(grid)
+    claim = "F_sl tends to evolve oversized linkages."
+    rule = (
+        "the median size of the best paths (max of width and height) is larger with F_sl "
+        "than with F_p, over all approaches"
+    )
+    by_fitness = sizes.groupby("fitness")["size"].median()
+    if not {"Fp", "Fsl"} <= set(by_fitness.index):
+        return Finding(claim, rule, NOT_TESTABLE, "the grid lacks finished Fp or Fsl trials")
+    verdict = REPRODUCED if by_fitness["Fsl"] > by_fitness["Fp"] else NOT_REPRODUCED
+    evidence = (
+        f"median best-path size {by_fitness['Fsl']:.3g} with F_sl vs "
+        f"{by_fitness['Fp']:.3g} with F_p (units)"
+    )
+    return Finding(claim, rule, verdict, evidence)

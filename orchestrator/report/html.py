@@ -1,0 +1,107 @@
+"""Provides `render_html`: one self-contained HTML page with the figures embedded."""
+
+from __future__ import annotations
+
+import base64
+import html
+from collections.abc import Sequence
+
+import pandas as pd
+
+from orchestrator.report.findings import REPRODUCED, Finding
+
+STYLE = """
+body { font-family: sans-serif; max-width: 1200px; margin: 2em auto; color: #222; }
+table { border-collapse: collapse; font-size: 0.8em; margin: 0.5em 0 1.5em; }
+th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; }
+th { background: #f3f3f3; }
+td.text { text-align: left; }
+img { max-width: 100%; }
+.reproduced { color: #196619; font-weight: bold; }
+.other { color: #a33; font-weight: bold; }
+.warn { background: #fff3e0; padding: 0.5em; border-left: 4px solid #e69500; }
+figcaption { font-size: 0.85em; color: #444; margin-bottom: 2em; }
+"""
+
+
+def _table(frame: pd.DataFrame) -> str:
+    """Returns an HTML table of `frame` (floats to 4 significant digits)."""
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
+    rows = []
+    for record in frame.itertuples(index=False):
+        cells = []
+        for value in record:
+            if isinstance(value, float):
+                cells.append(f"<td>{value:.4g}</td>")
+            else:
+                cells.append(f'<td class="text">{html.escape(str(value))}</td>')
+        rows.append("<tr>" + "".join(cells) + "</tr>")
+    return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
+
+
+def render_html(
+    *,
+    grid_id: str,
+    parent_run_id: str,
+    tracking_uri: str,
+    figures: Sequence[tuple[str, str, bytes]],
+    summary: pd.DataFrame,
+    tests: pd.DataFrame,
+    trials: pd.DataFrame,
+    findings: Sequence[Finding],
+) -> str:
+    """Returns the report page; every image is inlined as a base64 PNG data URI.
+
+    Args:
+        grid_id: the grid's id.
+        parent_run_id: the grid's parent MLflow run.
+        tracking_uri: the store the grid was read from.
+        figures: (title, caption, PNG bytes) per figure, in order.
+        summary: `stats.summary_table`.
+        tests: `stats.pairwise_tests`.
+        trials: per-trial table (trial_key, approach, fitness, status, error, best_loss).
+        findings: `findings.check_findings`.
+    """
+    unfinished = trials[trials.status != "FINISHED"]
+    parts = [
+        "<!DOCTYPE html><html><head><meta charset='utf-8'>",
+        f"<title>linkevo report {html.escape(grid_id)}</title><style>{STYLE}</style></head><body>",
+        f"<h1>Grid {html.escape(grid_id)}</h1>",
+        f"<p>Parent run <code>{html.escape(parent_run_id)}</code> in "
+        f"<code>{html.escape(tracking_uri)}</code>; {len(trials)} trials, "
+        f"{int((trials.status == 'FINISHED').sum())} finished.</p>",
+    ]
+    if len(unfinished):
+        parts.append(
+            f"<div class='warn'>{len(unfinished)} trials did not finish and are left out of "
+            "the statistics and figures:</div>"
+        )
+        parts.append(_table(unfinished[["trial_key", "status", "error"]].fillna("")))
+    parts.append("<h2>The study's findings on this grid</h2><table>")
+    parts.append("<tr><th>claim</th><th>verdict</th><th>rule</th><th>evidence</th></tr>")
+    for f in findings:
+        css = "reproduced" if f.verdict == REPRODUCED else "other"
+        parts.append(
+            f"<tr><td class='text'>{html.escape(f.claim)}</td>"
+            f"<td class='text {css}'>{html.escape(f.verdict)}</td>"
+            f"<td class='text'>{html.escape(f.rule)}</td>"
+            f"<td class='text'>{html.escape(f.evidence)}</td></tr>"
+        )
+    parts.append("</table>")
+    parts.append("<h2>Best loss per approach and fitness</h2>")
+    parts.append(_table(summary))
+    parts.append(
+        "<h2>Pairwise tests</h2><p>Two-sided Mann–Whitney U on the best loss, Holm-corrected "
+        "within each fitness; A12 = P(loss_a &gt; loss_b) + P(=)/2, so A12 &lt; 0.5 means "
+        "approach a tends to lower (better) losses.</p>"
+    )
+    parts.append(_table(tests))
+    for title, caption, png in figures:
+        data = base64.b64encode(png).decode("ascii")
+        parts.append(
+            f"<h2>{html.escape(title)}</h2><figure><img alt='{html.escape(title)}' "
+            f"src='data:image/png;base64,{data}'><figcaption>{html.escape(caption)}"
+            "</figcaption></figure>"
+        )
+    parts.append("</body></html>")
+    return "\n".join(parts)

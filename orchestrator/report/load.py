@@ -1,0 +1,376 @@
+"""Provides `load_grid`: one grid's trial runs, metric histories and archives as pandas."""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import unquote, urlparse
+
+import numpy as np
+import pandas as pd
+
+APPROACH_ORDER: tuple[str, ...] = (
+    "EA",
+    "NSGA-II",
+    "NSGA2",
+    "MAP-WH",
+    "MAP-LIS",
+    "MAP-ST",
+    "MAP-AU",
+)
+"""The study's approaches in report order (the grid config spells NSGA-II, older runs NSGA2)."""
+FITNESS_ORDER: tuple[str, ...] = ("Fp", "Fsl", "Fp2", "Fsl2")
+HISTORY_COLUMNS: tuple[str, ...] = (
+    "iteration",
+    "evaluations",
+    "best_loss",
+    "mean_loss",
+    "coverage",
+    "qd_score",
+    "hypervolume",
+)
+ARCHIVE_FILES: tuple[str, ...] = ("repertoire.parquet", "population.parquet")
+STATUS_MISSING = "MISSING"
+DOWNLOAD_THREADS = 8
+
+
+class GridNotFoundError(LookupError):
+    """No grid parent run matches the requested grid id (or no grid exists at all)."""
+
+
+@dataclass(frozen=True)
+class GridData:
+    """Everything a report needs from one grid, read from MLflow.
+
+    Attributes:
+        grid_id: the grid's id (tag `grid_id`).
+        parent_run_id: the grid's parent run, where the report is logged.
+        tracking_uri: the store it was read from.
+        config: the grid's resolved config (`grid_config.json`, else the parent's params).
+        trials: one row per trial (expected by the config or seen in MLflow), columns
+            trial_key, approach, fitness, trial_index, seed, run_id, status (FINISHED,
+            FAILED, KILLED, RUNNING or MISSING), error, best_loss (min of the best_loss
+            history; NaN unless FINISHED with metrics), final_evaluations, archive (local
+            parquet path or None).
+        history: long table, one row per trial and iteration: trial_key, approach,
+            fitness, status and the HISTORY_COLUMNS present in the runs (NaN where a run
+            did not log one).
+    """
+
+    grid_id: str
+    parent_run_id: str
+    tracking_uri: str
+    config: dict
+    trials: pd.DataFrame
+    history: pd.DataFrame
+
+    def finished(self) -> pd.DataFrame:
+        """Returns the FINISHED trials with a best loss (the ones statistics use)."""
+        done = self.trials[(self.trials.status == "FINISHED") & self.trials.best_loss.notna()]
+        return done.reset_index(drop=True)
+
+    def approaches(self) -> list[str]:
+        """Returns the grid's approaches in the study's order."""
+        return ordered(self.trials.approach.unique(), APPROACH_ORDER)
+
+    def fitnesses(self) -> list[str]:
+        """Returns the grid's fitness functions in the study's order."""
+        return ordered(self.trials.fitness.unique(), FITNESS_ORDER)
+
+
+def ordered(values: Iterable[str], order: tuple[str, ...]) -> list[str]:
+    """Returns the distinct `values`, known ones in `order` first, then the rest sorted."""
+    values = set(values)
+    return [v for v in order if v in values] + sorted(values - set(order))
+
+
+def find_grid_run(client, grid_id: str | None, experiment: str) -> tuple[str, str]:
+    """Returns (grid_id, parent_run_id) of `grid_id`, or of the latest grid when None.
+
+    Raises:
+        GridNotFoundError: no such experiment or grid run; the message lists known grids.
+    """
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None:
+        raise GridNotFoundError(f"no MLflow experiment {experiment!r} in this store")
+    query = "tags.`linkevo.kind` = 'grid'"
+    if grid_id is not None:
+        query += f" and tags.grid_id = '{grid_id}'"
+    runs = client.search_runs(
+        [exp.experiment_id], query, order_by=["attributes.start_time DESC"], max_results=1
+    )
+    if not runs:
+        known = client.search_runs(
+            [exp.experiment_id], "tags.`linkevo.kind` = 'grid'", max_results=20
+        )
+        names = sorted({r.data.tags.get("grid_id", "?") for r in known})
+        wanted = "any grid" if grid_id is None else f"grid {grid_id!r}"
+        raise GridNotFoundError(
+            f"no {wanted} in experiment {experiment!r}; known grids: {names or 'none'}"
+        )
+    run = runs[0]
+    return run.data.tags["grid_id"], run.info.run_id
+
+
+def load_grid(
+    tracking_uri: str,
+    grid_id: str | None,
+    cache_dir: Path,
+    experiment: str = "linkevo",
+) -> GridData:
+    """Returns one grid's runs, histories and archive paths (`grid_id` None: the latest).
+
+    One paged search lists the trials; each trial's `metrics.csv` and archive
+    parquet are read straight from a file-based artefact store, otherwise downloaded in
+    parallel into `cache_dir`. A trial without `metrics.csv` (a failed one, say) falls
+    back to its logged metric histories.
+    """
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=tracking_uri)
+    grid_id, parent_id = find_grid_run(client, grid_id, experiment)
+    runs = search_trial_runs(client, grid_id, experiment)
+    parent = client.get_run(parent_id)
+    config = _grid_config(parent, cache_dir)
+    runs = _latest_per_trial(runs)
+    with ThreadPoolExecutor(DOWNLOAD_THREADS) as pool:
+        fetched = list(
+            pool.map(
+                lambda row: _fetch_trial(client, row, cache_dir),
+                [row for _, row in runs.iterrows()],
+            )
+        )
+    histories = [h for h, _ in fetched]
+    trials = _trial_table(runs, histories, [a for _, a in fetched])
+    history = _history_table(trials, histories)
+    trials = _add_missing(trials, config)
+    if trials.empty:
+        raise GridNotFoundError(f"grid {grid_id!r} has no trial runs and no config naming any")
+    return GridData(
+        grid_id=grid_id,
+        parent_run_id=parent_id,
+        tracking_uri=tracking_uri,
+        config=config,
+        trials=trials,
+        history=history,
+    )
+
+
+def search_trial_runs(client, grid_id: str, experiment: str) -> pd.DataFrame:
+    """Returns the grid's trial runs as `mlflow.search_runs` would, one row per run.
+
+    Columns run_id, status, artifact_uri, start_time, `tags.<name>` and `metrics.<name>`
+    (last values). Built from `MlflowClient.search_runs` pages because the fluent
+    `mlflow.search_runs` reads the process-wide tracking URI, which a report must not
+    change.
+    """
+    exp = client.get_experiment_by_name(experiment)
+    query = f"tags.`linkevo.kind` = 'trial' and tags.grid_id = '{grid_id}'"
+    records, token = [], None
+    while True:
+        page = client.search_runs([exp.experiment_id], query, max_results=1000, page_token=token)
+        for run in page:
+            record = {
+                "run_id": run.info.run_id,
+                "status": run.info.status,
+                "artifact_uri": run.info.artifact_uri,
+                "start_time": run.info.start_time,
+            }
+            record.update({f"tags.{k}": v for k, v in run.data.tags.items()})
+            record.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
+            records.append(record)
+        token = page.token
+        if not token:
+            break
+    return pd.DataFrame.from_records(records)
+
+
+def _grid_config(parent, cache_dir: Path) -> dict:
+    """Returns the parent run's `grid_config.json`, else its params as a flat dict."""
+    path = _artefact(parent.info.artifact_uri, "grid_config.json", cache_dir / "grid")
+    if path is not None:
+        return json.loads(path.read_text())
+    return dict(parent.data.params)
+
+
+def _latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
+    """Returns one run per trial key: a FINISHED one if any, else the latest started."""
+    if runs.empty:
+        return pd.DataFrame(columns=["run_id", "status", "artifact_uri", "start_time"])
+    runs = runs.assign(_done=(runs.status == "FINISHED").astype(int))
+    runs = runs.sort_values(["_done", "start_time"], ascending=False)
+    runs = runs.drop_duplicates("tags.trial_key").drop(columns="_done")
+    return runs.reset_index(drop=True)
+
+
+def _fetch_trial(client, row: pd.Series, cache_dir: Path) -> tuple[pd.DataFrame, Path | None]:
+    """Returns (metric history, local archive path or None) of one trial run."""
+    folder = cache_dir / row.run_id
+    csv = _artefact(row.artifact_uri, "metrics.csv", folder)
+    history = pd.read_csv(csv) if csv is not None else _history_from_metrics(client, row)
+    archive = None
+    for name in ARCHIVE_FILES:
+        archive = _artefact(row.artifact_uri, name, folder)
+        if archive is not None:
+            break
+    return history, archive
+
+
+def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
+    """Returns a trial's history from its logged metrics (step = iteration)."""
+    names = [c.removeprefix("metrics.") for c in row.index if c.startswith("metrics.")]
+    series = {}
+    for name in names:
+        if name in HISTORY_COLUMNS and pd.notna(row[f"metrics.{name}"]):
+            points = client.get_metric_history(row.run_id, name)
+            series[name] = pd.Series({m.step: m.value for m in points}, dtype=float)
+    if not series:
+        return pd.DataFrame(columns=["iteration"])
+    table = pd.DataFrame(series).sort_index()
+    return table.rename_axis("iteration").reset_index()
+
+
+def _artefact(artifact_uri: str, name: str, folder: Path) -> Path | None:
+    """Returns a local path to artefact `name` of a run, or None when it has none.
+
+    A `file:` artefact root is read in place; any other is downloaded into `folder`.
+    """
+    parsed = urlparse(artifact_uri)
+    if parsed.scheme in ("file", ""):
+        path = Path(unquote(parsed.path)) / name
+        return path if path.is_file() else None
+    from mlflow.artifacts import download_artifacts
+    from mlflow.exceptions import MlflowException
+
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        return Path(download_artifacts(artifact_uri=f"{artifact_uri}/{name}", dst_path=folder))
+    except (MlflowException, OSError):
+        return None
+
+
+def _trial_table(
+    runs: pd.DataFrame, histories: list[pd.DataFrame], archives: list[Path | None]
+) -> pd.DataFrame:
+    """Returns one row per seen trial with its status and best loss."""
+
+    def tag(name: str) -> pd.Series:
+        column = f"tags.{name}"
+        return runs[column] if column in runs else pd.Series([None] * len(runs), dtype=object)
+
+    best = [
+        float(np.nanmin(h.best_loss)) if "best_loss" in h and h.best_loss.notna().any() else np.nan
+        for h in histories
+    ]
+    evals = [
+        float(h.evaluations.max()) if "evaluations" in h and len(h) else np.nan for h in histories
+    ]
+    table = pd.DataFrame(
+        {
+            "trial_key": tag("trial_key").astype(object),
+            "approach": tag("approach").astype(object),
+            "fitness": tag("fitness").astype(object),
+            "trial_index": pd.to_numeric(tag("trial_index"), errors="coerce"),
+            "seed": pd.to_numeric(tag("seed"), errors="coerce"),
+            "run_id": runs.run_id.astype(object),
+            "status": runs.status.astype(object),
+            "error": tag("error").astype(object),
+            "best_loss": best,
+            "final_evaluations": evals,
+            "archive": [str(a) if a is not None else None for a in archives],
+        }
+    )
+    table.loc[table.status != "FINISHED", "best_loss"] = np.nan
+    return table
+
+
+def _expected_cells(config: dict) -> list[tuple[str, str, int]] | None:
+    """Returns the (approach, fitness, trial_index) cells the config asks for, if stated."""
+
+    def find(key: str):
+        if key in config:
+            return config[key]
+        for value in config.values():
+            if isinstance(value, dict) and key in value:
+                return value[key]
+        return None
+
+    def as_list(value):
+        # Params hold lists as their Python repr, e.g. "['EA', 'MAP-LIS']".
+        return ast.literal_eval(value) if isinstance(value, str) else value
+
+    try:
+        approaches, fitnesses = as_list(find("approaches")), as_list(find("fitnesses"))
+        trials = int(find("trials"))
+    except (TypeError, ValueError, SyntaxError):
+        return None
+    if not isinstance(approaches, list) or not isinstance(fitnesses, list):
+        return None
+    return [(a, f, i) for a in approaches for f in fitnesses for i in range(trials)]
+
+
+def _add_missing(trials: pd.DataFrame, config: dict) -> pd.DataFrame:
+    """Returns `trials` plus a MISSING row for each cell the config expects but MLflow lacks."""
+    cells = _expected_cells(config)
+    if cells is None:
+        return trials
+    seen = set(zip(trials.approach, trials.fitness, trials.trial_index.astype(float), strict=True))
+    rows = [
+        {
+            "trial_key": f"{a}/{f}/{i:02d}",
+            "approach": a,
+            "fitness": f,
+            "trial_index": i,
+            "status": STATUS_MISSING,
+            "best_loss": np.nan,
+            "final_evaluations": np.nan,
+        }
+        for a, f, i in cells
+        if (a, f, float(i)) not in seen
+    ]
+    if not rows:
+        return trials
+    missing = pd.DataFrame(rows).reindex(columns=trials.columns)
+    return pd.concat([trials.astype(object), missing.astype(object)], ignore_index=True).astype(
+        {"best_loss": float, "final_evaluations": float, "trial_index": float}
+    )
+
+
+def _history_table(trials: pd.DataFrame, histories: list[pd.DataFrame]) -> pd.DataFrame:
+    """Returns all trials' histories stacked, with trial identity columns (row-aligned)."""
+    frames = []
+    for meta, history in zip(trials.itertuples(), histories, strict=True):
+        if history.empty:
+            continue
+        frame = history.reindex(columns=list(HISTORY_COLUMNS))
+        frame.insert(0, "trial_key", meta.trial_key)
+        frame.insert(1, "approach", meta.approach)
+        frame.insert(2, "fitness", meta.fitness)
+        frame.insert(3, "status", meta.status)
+        frames.append(frame)
+    columns = ["trial_key", "approach", "fitness", "status", *HISTORY_COLUMNS]
+    if not frames:
+        return pd.DataFrame(columns=columns)
+    return pd.concat(frames, ignore_index=True).astype({c: float for c in HISTORY_COLUMNS})
+
+
+def read_archive(path: str | os.PathLike, columns: Iterable[str] | None = None) -> pd.DataFrame:
+    """Returns the archive parquet at `path`, only the `columns` present when given."""
+    import pyarrow.parquet as pq
+
+    if columns is None:
+        return pq.read_table(path).to_pandas()
+    present = set(pq.read_schema(path).names)
+    return pq.read_table(path, columns=[c for c in columns if c in present]).to_pandas()
+
+
+def read_archives(paths: Iterable[str], columns: Iterable[str]) -> list[pd.DataFrame]:
+    """Returns `read_archive(path, columns)` of every path, read on a thread pool."""
+    columns = list(columns)
+    with ThreadPoolExecutor(DOWNLOAD_THREADS) as pool:
+        return list(pool.map(lambda path: read_archive(path, columns), paths))

@@ -1,0 +1,145 @@
+"""Provides the report's statistics: per-cell summaries, Mann–Whitney U, Holm, A12."""
+
+from __future__ import annotations
+
+from itertools import combinations
+
+import numpy as np
+import pandas as pd
+from scipy.stats import mannwhitneyu
+
+from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, ordered
+
+ALPHA = 0.05
+"""Family-wise significance level of the Holm-corrected tests (per fitness)."""
+A12_THRESHOLDS: tuple[tuple[float, str], ...] = (
+    (0.56, "negligible"),
+    (0.64, "small"),
+    (0.71, "medium"),
+)
+"""Vargha and Delaney's (2000) bounds on max(A12, 1 - A12); above the last: large."""
+
+
+def a12(x: np.ndarray, y: np.ndarray) -> float:
+    """Returns Vargha–Delaney A12 = P(X > Y) + P(X = Y) / 2 for samples x (n,), y (m,).
+
+    For losses, A12 < 0.5 means x tends to be lower (better) than y.
+    """
+    x = np.asarray(x, dtype=float)[:, None]
+    y = np.asarray(y, dtype=float)[None, :]
+    return float(((x > y).sum() + 0.5 * (x == y).sum()) / (x.size * y.size))
+
+
+def a12_magnitude(value: float) -> str:
+    """Returns the effect-size label of an A12 value (negligible, small, medium, large)."""
+    distance = max(value, 1.0 - value)
+    for bound, label in A12_THRESHOLDS:
+        if distance < bound:
+            return label
+    return "large"
+
+
+def holm(pvalues: np.ndarray) -> np.ndarray:
+    """Returns Holm–Bonferroni adjusted p-values (m,) for raw p-values (m,), same order."""
+    p = np.asarray(pvalues, dtype=float)
+    m = p.size
+    order = np.argsort(p, kind="stable")
+    scaled = np.minimum(1.0, (m - np.arange(m)) * p[order])
+    adjusted = np.empty(m)
+    adjusted[order] = np.maximum.accumulate(scaled)
+    return adjusted
+
+
+def summary_table(trials: pd.DataFrame) -> pd.DataFrame:
+    """Returns one row per approach × fitness: trial counts and best-loss quartiles.
+
+    Args:
+        trials: `GridData.trials` (columns approach, fitness, status, best_loss).
+
+    Returns:
+        Columns fitness, approach, n_finished, n_failed (FAILED), n_incomplete (KILLED or
+        RUNNING), n_missing, median, q1, q3, iqr, min, max; quartiles over the FINISHED
+        trials' best losses (NaN when none finished).
+    """
+    rows = []
+    for fitness in ordered(trials.fitness.unique(), FITNESS_ORDER):
+        for approach in ordered(trials.approach.unique(), APPROACH_ORDER):
+            cell = trials[(trials.approach == approach) & (trials.fitness == fitness)]
+            if cell.empty:
+                continue
+            losses = cell.best_loss[(cell.status == "FINISHED") & cell.best_loss.notna()]
+            q1, median, q3 = (
+                np.quantile(losses, [0.25, 0.5, 0.75]) if len(losses) else (np.nan,) * 3
+            )
+            rows.append(
+                {
+                    "fitness": fitness,
+                    "approach": approach,
+                    "n_finished": len(losses),
+                    "n_failed": int((cell.status == "FAILED").sum()),
+                    "n_incomplete": int(cell.status.isin(["KILLED", "RUNNING"]).sum()),
+                    "n_missing": int((cell.status == "MISSING").sum()),
+                    "median": median,
+                    "q1": q1,
+                    "q3": q3,
+                    "iqr": q3 - q1,
+                    "min": losses.min() if len(losses) else np.nan,
+                    "max": losses.max() if len(losses) else np.nan,
+                }
+            )
+    return pd.DataFrame(rows)
+
+
+def pairwise_tests(trials: pd.DataFrame) -> pd.DataFrame:
+    """Returns two-sided Mann–Whitney U tests of best loss between approaches, per fitness.
+
+    Holm's correction runs over the pairs within one fitness. Pairs where either side has
+    no finished trial are left out.
+
+    Returns:
+        Columns fitness, approach_a, approach_b, n_a, n_b, median_a, median_b, u (U of
+        a), p, p_holm, significant (p_holm < ALPHA), a12 (A12 of a over b), magnitude,
+        better (the approach with the lower median, or "" when equal).
+    """
+    done = trials[(trials.status == "FINISHED") & trials.best_loss.notna()]
+    frames = []
+    for fitness in ordered(done.fitness.unique(), FITNESS_ORDER):
+        groups = {
+            a: done.best_loss[(done.fitness == fitness) & (done.approach == a)].to_numpy()
+            for a in ordered(done.approach[done.fitness == fitness].unique(), APPROACH_ORDER)
+        }
+        rows = []
+        for a, b in combinations(groups, 2):
+            x, y = groups[a], groups[b]
+            test = mannwhitneyu(x, y, alternative="two-sided")
+            effect = a12(x, y)
+            med_a, med_b = float(np.median(x)), float(np.median(y))
+            rows.append(
+                {
+                    "fitness": fitness,
+                    "approach_a": a,
+                    "approach_b": b,
+                    "n_a": x.size,
+                    "n_b": y.size,
+                    "median_a": med_a,
+                    "median_b": med_b,
+                    "u": float(test.statistic),
+                    "p": float(test.pvalue),
+                    "a12": effect,
+                    "magnitude": a12_magnitude(effect),
+                    "better": a if med_a < med_b else b if med_b < med_a else "",
+                }
+            )
+        if rows:
+            frame = pd.DataFrame(rows)
+            frame.insert(frame.columns.get_loc("p") + 1, "p_holm", holm(frame.p.to_numpy()))
+            frame.insert(frame.columns.get_loc("p_holm") + 1, "significant", frame.p_holm < ALPHA)
+            frames.append(frame)
+    if not frames:
+        return pd.DataFrame(
+            columns=[
+                "fitness", "approach_a", "approach_b", "n_a", "n_b", "median_a", "median_b",
+                "u", "p", "p_holm", "significant", "a12", "magnitude", "better",
+            ]
+        )  # fmt: skip
+    return pd.concat(frames, ignore_index=True)

@@ -1,0 +1,76 @@
+"""Tests that a grid survives losing a worker node of a multi-node Ray cluster."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+from grid_helpers import runs_by_key, tiny_grid
+from mlflow.tracking import MlflowClient
+
+from orchestrator.driver import launch
+from workers.tracking import ensure_experiment
+
+pytestmark = pytest.mark.ray
+
+NODE_ARGS = {"num_cpus": 1, "object_store_memory": 100 * 1024**2}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A head and two 1-CPU worker nodes on this machine."""
+    import ray
+    from ray.cluster_utils import Cluster
+
+    nodes = Cluster(initialize_head=True, head_node_args={**NODE_ARGS, "include_dashboard": False})
+    workers = [nodes.add_node(**NODE_ARGS) for _ in range(2)]
+    nodes.wait_for_nodes()
+    ray.init(address=nodes.address)
+    yield nodes, workers
+    ray.shutdown()
+    nodes.shutdown()
+
+
+def running_on(uri: str, grid_id: str, node_id: str) -> str | None:
+    """Returns the key of a trial running on `node_id` that has logged an iteration."""
+    client = MlflowClient(uri)
+    experiment = client.get_experiment_by_name("linkevo")
+    runs = client.search_runs(
+        [experiment.experiment_id],
+        f"tags.grid_id = '{grid_id}' and attributes.status = 'RUNNING' "
+        f"and tags.ray_node = '{node_id}'",
+    )
+    for run in runs:
+        if "evaluations" in run.data.metrics:
+            return run.data.tags["trial_key"]
+    return None
+
+
+def test_grid_survives_removing_a_worker_node(cluster, tmp_path):
+    nodes, workers = cluster
+    grid = tiny_grid(tmp_path, approaches=["EA", "MAP-LIS"], fitnesses=["Fp"], evaluations=2000)
+    uri = grid.config.tracking_uri
+    ensure_experiment(uri)
+    outcome = {}
+    driver = threading.Thread(target=lambda: outcome.update(result=launch(grid, progress=False)))
+    driver.start()
+    victim = workers[0]
+    deadline = time.monotonic() + 180
+    key = None
+    while key is None:
+        assert time.monotonic() < deadline, "no trial ran on the worker node"
+        assert driver.is_alive(), "the grid ended before a trial ran on the worker node"
+        key = running_on(uri, grid.grid_id, victim.node_id)
+        time.sleep(0.1)
+    nodes.remove_node(victim)
+    nodes.add_node(**NODE_ARGS)
+    driver.join(timeout=240)
+    assert not driver.is_alive()
+    result = outcome["result"]
+    assert not result.failed
+    by_key = runs_by_key(uri, grid.grid_id)
+    assert sorted(by_key) == sorted(c.key for c in grid.cells)
+    for runs in by_key.values():
+        assert [status for _, status in runs].count("FINISHED") == 1
+    assert sorted(status for _, status in by_key[key]) == ["FINISHED", "KILLED"]

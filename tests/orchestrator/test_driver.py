@@ -1,0 +1,219 @@
+"""Tests a real grid on a real local Ray instance with a real MLflow store."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+from grid_helpers import runs_by_key, tiny_grid
+from mlflow.tracking import MlflowClient
+
+from orchestrator.config import ConfigError
+from orchestrator.driver import launch, summary, trial_dir, work_root
+from orchestrator.grid import CODE_VERSION_ENV
+from workers.tracking import ensure_experiment
+
+pytestmark = pytest.mark.ray
+
+LINKEVO = "import sys; from orchestrator.cli import main; sys.exit(main())"
+"""Runs the `linkevo` CLI in a subprocess, whatever the console script's location."""
+SPEC_PARAMS = {
+    "approach",
+    "fitness",
+    "mode",
+    "evaluations",
+    "batch_size",
+    "seed",
+    "n_angles",
+    "target",
+}
+
+
+def check_trial_runs(uri: str, grid, result, tmp_path: Path) -> None:
+    """Asserts one FINISHED nested run per key with the documented params/metrics/artefacts."""
+    client = MlflowClient(uri)
+    by_key = runs_by_key(uri, grid.grid_id)
+    assert sorted(by_key) == sorted(c.key for c in grid.cells)
+    for cell in grid.cells:
+        ((run_id, status),) = by_key[cell.key]
+        assert status == "FINISHED"
+        run = client.get_run(run_id)
+        tags = run.data.tags
+        assert tags["mlflow.parentRunId"] == result.parent_run_id
+        assert tags["linkevo.kind"] == "trial"
+        assert (tags["approach"], tags["fitness"]) == (cell.approach, cell.fitness)
+        assert tags["seed"] == str(cell.seed)
+        assert tags["trial_index"] == str(cell.index)
+        assert run.info.run_name == cell.key
+        assert set(run.data.params) >= SPEC_PARAMS
+        assert run.data.params["seed"] == str(cell.seed)
+        assert run.data.params["evaluations"] == str(grid.config.evaluations)
+        history = client.get_metric_history(run_id, "evaluations")
+        assert [m.step for m in history] == list(range(1, len(history) + 1))
+        assert history[-1].value == grid.config.evaluations
+        for name in ("best_loss", "mean_loss", "coverage", "qd_score"):
+            assert len(client.get_metric_history(run_id, name)) == len(history)
+        names = {a.path for a in client.list_artifacts(run_id)}
+        kept = "repertoire.parquet" if cell.approach.startswith("MAP") else "population.parquet"
+        expected = {"metrics.csv", kept, "best_linkage.json", "best_linkage.png", "settings.json"}
+        assert expected <= names, names
+        local = client.download_artifacts(run_id, "metrics.csv", str(tmp_path))
+        rows = list(csv.DictReader(Path(local).read_text().splitlines()))
+        assert len(rows) == len(history)
+        assert float(rows[-1]["best_loss"]) == pytest.approx(run.data.metrics["best_loss"])
+
+
+def test_small_grid_ends_with_one_finished_run_per_trial_key(ray_local, tmp_path):
+    grid = tiny_grid(tmp_path)
+    result = launch(grid, progress=False)
+    assert not result.failed
+    uri = result.tracking_uri
+    check_trial_runs(uri, grid, result, tmp_path)
+    client = MlflowClient(uri)
+    parent = client.get_run(result.parent_run_id)
+    assert parent.info.status == "FINISHED"
+    assert parent.info.run_name == f"grid-{grid.grid_id}"
+    assert parent.data.tags["linkevo.kind"] == "grid"
+    assert parent.data.tags["code_version"] == grid.code_version
+    assert parent.data.params["approaches"] == "['EA', 'MAP-LIS']"
+    path = client.download_artifacts(parent.info.run_id, "grid_config.json", str(tmp_path))
+    resolved = json.loads(Path(path).read_text())
+    assert resolved == grid.config.to_dict()
+    assert "grid_config.toml" in {a.path for a in client.list_artifacts(parent.info.run_id)}
+    out_dir = trial_dir(work_root(grid.config, uri), grid, grid.cells[0])
+    assert (out_dir / "checkpoint").is_dir()
+    assert "EA" in summary(result, grid.config)
+
+    with pytest.raises(ConfigError, match="pass --resume"):
+        launch(grid, progress=False)
+    again = launch(grid, resume=True, progress=False)
+    assert sorted(again.skipped) == sorted(c.key for c in grid.cells)
+    assert all(len(v) == 1 for v in runs_by_key(uri, grid.grid_id).values())
+
+
+def test_failed_trial_is_reported_and_the_others_finish(ray_local, tmp_path):
+    grid = tiny_grid(tmp_path, approaches=["EA"], fitnesses=["Fp"], trials=2)
+    uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
+    broken = trial_dir(work_root(grid.config, uri), grid, grid.cells[1])
+    broken.parent.mkdir(parents=True)
+    broken.write_text("a file where the trial folder should be")
+    result = launch(grid, progress=False)
+    assert [o.trial_key for o in result.failed] == [grid.cells[1].key]
+    by_key = runs_by_key(uri, grid.grid_id)
+    assert [s for _, s in by_key[grid.cells[1].key]] == ["FAILED"]
+    assert [s for _, s in by_key[grid.cells[0].key]] == ["FINISHED"]
+    client = MlflowClient(uri)
+    failed = client.get_run(by_key[grid.cells[1].key][0][0])
+    assert "FileExistsError" in failed.data.tags["error"]
+    assert client.get_run(result.parent_run_id).info.status == "FAILED"
+    assert "failed trials:" in summary(result, grid.config)
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.fixture
+def mlflow_server(tmp_path):
+    """A real `mlflow server` on loopback, with its own sqlite store and artefact folder."""
+    port = free_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "mlflow", "server",
+         "--backend-store-uri", f"sqlite:///{tmp_path / 'server.db'}",
+         "--artifacts-destination", str(tmp_path / "server-artifacts"),
+         "--host", "127.0.0.1", "--port", str(port), "--workers", "1"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        env={**os.environ, "MLFLOW_TRACKING_URI": ""},
+    )  # fmt: skip
+    uri = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 90
+    while True:
+        try:
+            with urllib.request.urlopen(uri + "/health", timeout=2) as response:
+                if response.status == 200:
+                    break
+        except OSError:
+            pass
+        assert proc.poll() is None, "mlflow server exited"
+        assert time.monotonic() < deadline, "mlflow server did not answer /health"
+        time.sleep(0.5)
+    yield uri
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+def test_grid_logs_through_an_mlflow_server_over_http(ray_local, tmp_path, mlflow_server):
+    grid = tiny_grid(
+        tmp_path,
+        tracking_uri=mlflow_server,
+        work_dir=str(tmp_path / "work"),
+        approaches=["MAP-LIS"],
+        trials=1,
+    )
+    result = launch(grid, progress=False)
+    assert not result.failed
+    assert result.tracking_uri == mlflow_server
+    check_trial_runs(mlflow_server, grid, result, tmp_path)
+    assert (tmp_path / "work" / "trials" / grid.grid_id).is_dir()
+    assert (tmp_path / "server-artifacts").is_dir()
+
+
+def poll_finished(uri: str, grid_id: str, at_least: int, proc: subprocess.Popen) -> set[str]:
+    """Returns the FINISHED keys once there are `at_least` of them (while `proc` runs)."""
+    deadline = time.monotonic() + 240
+    while time.monotonic() < deadline:
+        finished = {
+            key
+            for key, runs in runs_by_key(uri, grid_id).items()
+            if any(status == "FINISHED" for _, status in runs)
+        }
+        if len(finished) >= at_least:
+            return finished
+        assert proc.poll() is None, "the driver ended before it was killed"
+        time.sleep(0.2)
+    raise AssertionError("no trial finished in time")
+
+
+def test_killed_driver_resumes_only_the_missing_trials(ray_local, tmp_path, monkeypatch):
+    # Pin the code version: a commit landing mid-test must not change the grid id.
+    monkeypatch.setenv(CODE_VERSION_ENV, "kill-resume-test")
+    grid = tiny_grid(tmp_path, approaches=["MAP-LIS"], evaluations=1000)
+    uri = grid.config.tracking_uri
+    address = ray_local.get_runtime_context().gcs_address
+    command = [sys.executable, "-c", LINKEVO, "grid", str(tmp_path / "tiny.toml"),
+               "--address", address, "--no-progress"]  # fmt: skip
+    ensure_experiment(uri)  # the poll below must not race the driver's schema creation
+    driver = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    poll_finished(uri, grid.grid_id, 1, driver)
+    driver.kill()
+    driver.wait(timeout=30)
+    before = runs_by_key(uri, grid.grid_id)
+    finished_before = {k for k, runs in before.items() if runs[0][1] == "FINISHED"}
+    missing = {c.key for c in grid.cells} - finished_before
+    assert missing, "every trial finished before the kill"
+
+    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert f"({len(finished_before)} already finished before this launch)" in resumed.stdout
+    after = runs_by_key(uri, grid.grid_id)
+    client = MlflowClient(uri)
+    for key in finished_before:
+        assert after[key] == before[key]
+    for key in missing:
+        earlier = {run_id for run_id, _ in before.get(key, [])}
+        new = [(run_id, status) for run_id, status in after[key] if run_id not in earlier]
+        assert len(new) == 1
+        assert new[0][1] == "FINISHED"
+        assert all(status == "KILLED" for run_id, status in after[key] if run_id in earlier)
+        steps = [m.step for m in client.get_metric_history(new[0][0], "evaluations")]
+        assert steps == [1, 2, 3, 4, 5]

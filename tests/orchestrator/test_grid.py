@@ -1,0 +1,110 @@
+"""Tests the grid expansion: trial keys, deterministic seeds, grid ids, the dry run."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from orchestrator.cli import main
+from orchestrator.config import GridConfig
+from orchestrator.grid import Grid, trial_seed
+from workers.tracking import ensure_experiment
+
+CONFIGS = Path(__file__).resolve().parents[2] / "configs"
+
+
+def test_cells_cover_every_approach_fitness_and_trial_once():
+    grid = Grid.from_config(
+        GridConfig(trials=3, approaches=("EA", "MAP-LIS"), fitnesses=("Fp", "Fsl")), "v1"
+    )
+    keys = [c.key for c in grid.cells]
+    assert len(keys) == len(set(keys)) == 12
+    assert keys[0] == "EA/Fp/00"
+    assert "MAP-LIS/Fsl/02" in keys
+    assert grid.cell("MAP-LIS/Fsl/02").dirname == "MAP-LIS_Fsl_02"
+    with pytest.raises(KeyError):
+        grid.cell("MAP-LIS/Fsl/03")
+
+
+def test_seeds_depend_on_grid_seed_and_cell_only():
+    small = Grid.from_config(GridConfig(trials=2, approaches=("MAP-LIS",)), "v1")
+    large = Grid.from_config(GridConfig(trials=5, approaches=("EA", "MAP-LIS")), "v1")
+    for cell in small.cells:
+        assert large.cell(cell.key).seed == cell.seed
+    seeds = [c.seed for c in large.cells]
+    assert len(set(seeds)) == len(seeds)
+    assert trial_seed(0, "EA", "Fp", 0) != trial_seed(1, "EA", "Fp", 0)
+    assert all(0 <= s < 2**32 for s in seeds)
+
+
+def test_grid_id_hashes_results_config_and_code_version():
+    cfg = GridConfig(trials=2)
+    grid_id = Grid.from_config(cfg, "v1").grid_id
+    assert len(grid_id) == 12
+    assert Grid.from_config(GridConfig(trials=2), "v1").grid_id == grid_id
+    assert Grid.from_config(GridConfig(trials=2, max_concurrent_trials=7), "v1").grid_id == grid_id
+    assert Grid.from_config(cfg, "v2").grid_id != grid_id
+    assert Grid.from_config(GridConfig(trials=2, evaluations=10), "v1").grid_id != grid_id
+
+
+def test_dry_run_prints_the_plan_and_starts_nothing(tmp_path, capsys):
+    db = tmp_path / "store"
+    code = main(
+        [
+            "grid",
+            str(CONFIGS / "quick.toml"),
+            "--dry-run",
+            "--set",
+            "trials=2",
+            "--tracking-uri",
+            str(db),
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0
+    assert "24 trials" in out
+    assert "MAP-AU/Fsl/01" in out
+    assert "trials = 2" in out
+    assert not db.exists()
+
+
+def test_ui_serves_the_store_on_loopback(tmp_path):
+    uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
+    ensure_experiment(uri)
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    code = "import sys; from orchestrator.cli import main; sys.exit(main())"
+    ui = subprocess.Popen(
+        [sys.executable, "-c", code, "ui", "--tracking-uri", uri, "--port", str(port)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2) as r:
+                    assert r.status == 200
+                    break
+            except OSError:
+                assert ui.poll() is None, "linkevo ui exited"
+                assert time.monotonic() < deadline, "the UI did not answer /health"
+                time.sleep(0.5)
+        request = f"http://127.0.0.1:{port}/ajax-api/2.0/mlflow/experiments/search?max_results=10"
+        with urllib.request.urlopen(request, timeout=10) as r:
+            names = [e["name"] for e in json.loads(r.read())["experiments"]]
+        assert "linkevo" in names
+    finally:
+        os.killpg(ui.pid, signal.SIGTERM)
+        ui.wait(timeout=30)

@@ -1,0 +1,328 @@
+"""Tests of `linkevo report` on a real MLflow store holding a grid with a failed trial."""
+
+from __future__ import annotations
+
+import base64
+import io
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from mlflow.tracking import MlflowClient
+from PIL import Image
+from report_fixtures import GridSpec, write_grid
+from scipy.stats import mannwhitneyu
+
+from orchestrator.cli import main
+from orchestrator.report import build_report, load_grid
+from orchestrator.report import figures as fig
+from orchestrator.report.findings import NOT_TESTABLE, REPRODUCED, check_findings
+from orchestrator.report.stats import holm, pairwise_tests
+
+SPEC = GridSpec(
+    grid_id="g0report",
+    trials=6,
+    failed=("MAP-WH/Fp/01",),
+    missing=("EA/Fsl/02",),
+)
+"""4 approaches x 2 fitnesses x 6 trials; one trial failed, one never started."""
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory):
+    """The written grid and its report (built once for the module)."""
+    folder = tmp_path_factory.mktemp("report")
+    written = write_grid(folder / "store", SPEC)
+    result = build_report(written.uri, SPEC.grid_id, folder / "out")
+    return written, result
+
+
+@pytest.fixture(scope="module")
+def loaded(grid, tmp_path_factory):
+    written, _ = grid
+    return load_grid(written.uri, SPEC.grid_id, tmp_path_factory.mktemp("cache"))
+
+
+def raw_best_losses(written) -> pd.DataFrame:
+    """Returns each finished trial's best loss recomputed from its logged metric history."""
+    client = MlflowClient(tracking_uri=written.uri)
+    rows = []
+    for key, run_id in written.run_ids.items():
+        run = client.get_run(run_id)
+        if run.info.status != "FINISHED":
+            continue
+        history = client.get_metric_history(run_id, "best_loss")
+        approach, fitness, _ = key.split("/")
+        rows.append((key, approach, fitness, min(m.value for m in history)))
+    return pd.DataFrame(rows, columns=["trial_key", "approach", "fitness", "best_loss"])
+
+
+def test_summary_table_equals_values_recomputed_from_raw_metrics(grid):
+    written, result = grid
+    raw = raw_best_losses(written)
+    summary = pd.read_csv(result.out_dir / "best_loss_summary.csv")
+    assert len(summary) == len(SPEC.approaches) * len(SPEC.fitnesses)
+    for row in summary.itertuples():
+        values = raw.best_loss[(raw.approach == row.approach) & (raw.fitness == row.fitness)]
+        assert row.n_finished == len(values)
+        q1, median, q3 = np.quantile(values, [0.25, 0.5, 0.75])
+        assert row.median == pytest.approx(median, rel=1e-12)
+        assert row.iqr == pytest.approx(q3 - q1, rel=1e-9, abs=1e-12)
+        assert row.min == pytest.approx(values.min(), rel=1e-12)
+
+
+def test_failed_and_missing_trials_are_marked_not_counted(grid):
+    _, result = grid
+    trials = pd.read_csv(result.out_dir / "trials.csv").set_index("trial_key")
+    assert trials.loc["MAP-WH/Fp/01", "status"] == "FAILED"
+    assert "boom" in trials.loc["MAP-WH/Fp/01", "error"]
+    assert trials.loc["EA/Fsl/02", "status"] == "MISSING"
+    assert np.isnan(trials.loc["MAP-WH/Fp/01", "best_loss"])
+    summary = result.summary.set_index(["fitness", "approach"])
+    assert summary.loc[("Fp", "MAP-WH"), ["n_finished", "n_failed"]].tolist() == [5, 1]
+    assert summary.loc[("Fsl", "EA"), ["n_finished", "n_missing"]].tolist() == [5, 1]
+    page = result.html.read_text()
+    assert "MAP-WH/Fp/01" in page and "MISSING" in page
+
+
+def test_pairwise_tests_match_scipy_on_the_raw_best_losses(grid):
+    written, result = grid
+    raw = raw_best_losses(written)
+    tests = pd.read_csv(result.out_dir / "pairwise_tests.csv")
+    k = len(SPEC.approaches)
+    assert len(tests) == len(SPEC.fitnesses) * k * (k - 1) // 2
+    for fitness, block in tests.groupby("fitness"):
+        p_values = []
+        for row in block.itertuples():
+            x = raw.best_loss[(raw.fitness == fitness) & (raw.approach == row.approach_a)]
+            y = raw.best_loss[(raw.fitness == fitness) & (raw.approach == row.approach_b)]
+            expected = mannwhitneyu(x, y, alternative="two-sided")
+            assert row.u == pytest.approx(expected.statistic)
+            assert row.p == pytest.approx(expected.pvalue, rel=1e-9)
+            assert row.a12 == pytest.approx(expected.statistic / (len(x) * len(y)))
+            p_values.append(expected.pvalue)
+        assert block.p_holm.to_numpy() == pytest.approx(holm(np.array(p_values)))
+
+
+def test_holm_adjusts_known_p_values():
+    adjusted = holm(np.array([0.01, 0.04, 0.03, 0.005]))
+    # sorted 0.005, 0.01, 0.03, 0.04 -> x4, x3, x2, x1 = 0.02, 0.03, 0.06, 0.04 -> running max
+    assert adjusted == pytest.approx([0.03, 0.06, 0.06, 0.02])
+    assert holm(np.array([0.5, 0.6])) == pytest.approx([1.0, 1.0])
+
+
+def test_a12_and_u_agree_with_scipy_on_known_data():
+    x = np.array([1.0, 2.0, 3.0, 3.0, 7.0])
+    y = np.array([2.0, 3.0, 4.0, 5.0])
+    trials = pd.DataFrame(
+        {
+            "approach": ["EA"] * 5 + ["MAP-WH"] * 4,
+            "fitness": "Fp",
+            "status": "FINISHED",
+            "best_loss": np.concatenate([x, y]),
+        }
+    )
+    row = pairwise_tests(trials).iloc[0]
+    expected = mannwhitneyu(x, y, alternative="two-sided")
+    assert row.u == expected.statistic
+    assert row.p == pytest.approx(expected.pvalue)
+    # pairs x > y: 3>2, 3>2, 7>all four = 6; ties x == y: 2=2, 3=3 twice = 3 -> (6 + 1.5) / 20
+    assert row.a12 == pytest.approx(7.5 / 20)
+    assert row.p_holm == pytest.approx(row.p)
+    assert row.better == "EA"
+
+
+def test_each_figure_has_its_panels_and_labels(loaded):
+    box = fig.best_loss_figure(loaded).figure
+    assert [ax.get_title() for ax in box.axes] == ["F_p", "F_sl"]
+    ticks = [t.get_text() for t in box.axes[0].get_xticklabels()]
+    assert ticks[0].startswith("EA\nn=6") and "MAP-WH\nn=5\n1 not finished" in ticks
+
+    maps = fig.repertoire_maps_figure(loaded).figure
+    images = [ax for ax in maps.axes if ax.images]
+    assert [ax.get_title().split(":")[0] for ax in images] == [
+        "MAP-WH, F_p",
+        "MAP-ST, F_p",
+        "MAP-WH, F_sl",
+        "MAP-ST, F_sl",
+    ]
+    assert images[0].get_xlabel() == "width (bin)" and images[0].get_ylabel() == "height (bin)"
+    assert "mean_beam_length (outer bins)" in images[1].get_ylabel()
+    assert "moving_share (inner" in images[1].get_xlabel()
+    assert images[1].images[0].get_array().shape == (100, 100)
+
+    paths = fig.path_maps_figure(loaded, "Fp").figure
+    titled = [ax.get_title().split(":")[0] for ax in paths.axes if ax.get_title()]
+    assert titled == ["MAP-WH, F_p", "MAP-ST, F_p", "EA, F_p", "NSGA-II, F_p"]
+    assert paths.axes[-1].get_ylabel() == "loss"  # the one shared colour bar
+    ea = next(ax for ax in paths.axes if ax.get_title().startswith("EA"))
+    assert len(ea.collections[0].get_segments()) == fig.STRIP_PATHS
+    assert len(ea.texts) == fig.STRIP_PATHS
+
+    conv = fig.convergence_figure(loaded).figure
+    titles = [ax.get_title() for ax in conv.axes]
+    assert titles == [
+        f"{m}, {f}" for f in ("F_p", "F_sl") for m in ("best loss", "coverage", "QD-score")
+    ]
+    assert all(ax.get_xlabel() == "evaluations" for ax in conv.axes)
+    legend = [t.get_text() for t in conv.axes[0].get_legend().get_texts()]
+    assert legend == ["EA", "NSGA-II", "MAP-WH", "MAP-ST"]
+
+
+def test_repertoire_map_holds_the_best_loss_per_cell_over_trials(loaded):
+    trials = loaded.finished()
+    chosen = trials[(trials.approach == "MAP-ST") & (trials.fitness == "Fsl")]
+    archives = pd.concat([pd.read_parquet(p) for p in chosen.archive], ignore_index=True)
+    expected = archives.groupby(["bin_0", "bin_1", "bin_2", "bin_3"]).loss.min()
+    maps = fig.repertoire_maps_figure(loaded).figure
+    panel = next(ax for ax in maps.axes if ax.get_title().startswith("MAP-ST, F_sl"))
+    image = panel.images[0].get_array()
+    assert int((~image.mask).sum()) == len(expected)
+    for (b0, b1, b2, b3), loss in expected.items():
+        assert image[b0 * 10 + b2, b1 * 10 + b3] == pytest.approx(loss)
+
+
+def test_path_maps_take_the_best_path_per_downsampled_region(loaded):
+    trial = loaded.finished().query("approach == 'MAP-WH' and fitness == 'Fsl'")
+    trial = trial.loc[trial.best_loss.idxmin()]
+    archive = pd.read_parquet(trial.archive)
+    chosen = fig.select_paths(archive, "MAP-WH")
+    regions = archive.assign(row=archive.bin_0 // 20, col=archive.bin_1 // 20)
+    expected = regions.groupby(["row", "col"]).loss.min()
+    got = chosen.set_index(["row", "col"]).loss.sort_index()
+    assert got.to_numpy() == pytest.approx(expected.sort_index().to_numpy())
+
+
+def test_fold_bins_nests_the_inner_dimensions_in_blocks():
+    rows, cols, side = fig.fold_bins(np.array([[1, 2, 3, 4], [9, 9, 9, 9]]), 10)
+    assert (rows.tolist(), cols.tolist(), side) == ([13, 99], [24, 99], 100)
+    with pytest.raises(ValueError, match="3-D"):
+        fig.fold_bins(np.zeros((1, 3), dtype=int), 10)
+
+
+def test_findings_are_checked_with_their_numbers(grid, loaded):
+    _, result = grid
+    verdicts = {f.claim: f for f in result.findings}
+    beats_ea = verdicts["With F_p, the MAP-Elites approaches beat the EA."]
+    assert beats_ea.verdict == REPRODUCED
+    assert "MAP-WH median" in beats_ea.evidence and "Holm p" in beats_ea.evidence
+    assert verdicts["With F_p, the MAP-Elites approaches slightly beat NSGA-II."].verdict == (
+        REPRODUCED
+    )
+    fsl = result.tests[result.tests.fitness == "Fsl"]
+    similar = verdicts["With F_sl, all approaches perform similarly."]
+    assert (similar.verdict == REPRODUCED) == (not fsl.significant.any())
+    findings_csv = pd.read_csv(result.out_dir / "findings.csv")
+    assert findings_csv.verdict.tolist() == [f.verdict for f in result.findings]
+    assert verdicts["F_sl tends to evolve oversized linkages."].verdict == REPRODUCED
+    without_ea = pairwise_tests(loaded.trials[loaded.trials.approach != "EA"])
+    assert check_findings(loaded, without_ea)[0].verdict == NOT_TESTABLE
+
+
+def test_html_is_self_contained_and_report_is_logged_to_the_parent_run(grid):
+    written, result = grid
+    page = result.html.read_text()
+    pngs = page.split("data:image/png;base64,")[1:]
+    assert len(pngs) == 5
+    for chunk in pngs:
+        Image.open(io.BytesIO(base64.b64decode(chunk.split("'", 1)[0]))).verify()
+    assert "src='http" not in page and 'src="http' not in page
+    for name in ("best_loss", "repertoire_maps", "paths_Fp", "paths_Fsl", "convergence"):
+        assert (result.out_dir / f"{name}.pdf").read_bytes().startswith(b"%PDF")
+        with Image.open(result.out_dir / f"{name}.png") as image:
+            assert image.size[0] > 300
+    client = MlflowClient(tracking_uri=written.uri)
+    logged = {Path(a.path).name for a in client.list_artifacts(written.parent_run_id, "report")}
+    assert {f.name for f in result.files} <= logged
+
+
+def test_a_cell_with_only_failed_trials_still_reports(tmp_path):
+    spec = GridSpec(
+        grid_id="g0broken",
+        approaches=("EA", "MAP-LIS"),
+        fitnesses=("Fp",),
+        trials=2,
+        failed=("MAP-LIS/Fp/00", "MAP-LIS/Fp/01"),
+    )
+    written = write_grid(tmp_path / "store", spec)
+    result = build_report(written.uri, None, tmp_path / "out", log_to_mlflow=False)
+    row = result.summary.set_index("approach").loc["MAP-LIS"]
+    assert row.n_finished == 0 and row.n_failed == 2 and np.isnan(row["median"])
+    assert result.tests.empty
+    assert (tmp_path / "out" / "best_loss.png").is_file()
+    assert "not finished" in result.html.read_text() or "did not finish" in result.html.read_text()
+
+
+def test_cli_reports_latest_grid_and_names_unknown_grids(grid, tmp_path, capsys):
+    written, _ = grid
+    out = tmp_path / "cli"
+    argv = ["report", "--latest", "--tracking-uri", written.uri, "--out", str(out), "--no-log"]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    assert f"grid {SPEC.grid_id}" in printed and "[reproduced]" in printed
+    assert (out / "report.html").is_file()
+    assert main(["report", "nope", "--tracking-uri", written.uri, "--no-log"]) == 2
+    err = capsys.readouterr().err
+    assert "'nope'" in err and SPEC.grid_id in err
+    assert main(["report", "a'b", "--tracking-uri", written.uri, "--no-log"]) == 2
+    assert 'grid id "a\'b" is invalid' in capsys.readouterr().err
+    assert main(["report", "--latest", "--tracking-uri", f"sqlite:///{tmp_path}/x.db"]) == 2
+    assert "no MLflow database" in capsys.readouterr().err
+
+
+def test_a_grid_without_trials_is_a_clear_error(tmp_path, capsys):
+    written = write_grid(tmp_path / "store", GridSpec(grid_id="g0empty", approaches=()))
+    assert main(["report", "g0empty", "--tracking-uri", written.uri, "--no-log"]) == 2
+    assert "'g0empty' has no trial runs" in capsys.readouterr().err
+
+
+@pytest.fixture
+def mlflow_server(tmp_path):
+    """A real `mlflow server` on 127.0.0.1 (sqlite + proxied artefacts); yields its URI."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    store = tmp_path / "server"
+    store.mkdir()
+    command = [
+        str(Path(sys.executable).parent / "mlflow"), "server", "--host", "127.0.0.1",
+        "--port", str(port), "--workers", "1",
+        "--backend-store-uri", f"sqlite:///{store / 'mlflow.db'}",
+        "--artifacts-destination", str(store / "artefacts"),
+    ]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    uri = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with urllib.request.urlopen(f"{uri}/health", timeout=2):
+                    break
+            except OSError:
+                if time.monotonic() > deadline or process.poll() is not None:
+                    raise RuntimeError("mlflow server did not start") from None
+                time.sleep(0.5)
+        yield uri
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+def test_report_downloads_artefacts_through_a_tracking_server(mlflow_server, tmp_path):
+    spec = GridSpec(grid_id="g0served", approaches=("EA", "MAP-LIS"), fitnesses=("Fp",), trials=2)
+    written = write_grid(tmp_path / "files", spec, server_uri=mlflow_server)
+    grid = load_grid(mlflow_server, None, tmp_path / "cache")
+    assert grid.trials.archive.str.startswith(str(tmp_path / "cache")).all()
+    result = build_report(mlflow_server, None, tmp_path / "out")
+    raw = raw_best_losses(written).set_index("trial_key").best_loss
+    got = pd.read_csv(result.out_dir / "trials.csv").set_index("trial_key").best_loss
+    assert got.sort_index().to_numpy() == pytest.approx(raw.sort_index().to_numpy())
+    client = MlflowClient(tracking_uri=mlflow_server)
+    logged = {a.path for a in client.list_artifacts(written.parent_run_id, "report")}
+    assert "report/report.html" in logged

@@ -1,0 +1,217 @@
+"""Provides the Ray trial task: one grid trial as a nested MLflow run with evaluator actors."""
+
+from __future__ import annotations
+
+import contextlib
+import socket
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import ray
+from mlflow.entities import Param, Run
+from mlflow.tracking import MlflowClient
+
+from workers.mlflow_recorder import MlflowRecorder
+from workers.ray_evaluator import ActorPoolEvaluator
+from workers.trial import TrialSpec, run_trial
+
+ERROR_TAG_CHARS = 500
+"""How much of a failure message the `error` tag keeps."""
+RETRYABLE_ERRORS: tuple[type[BaseException], ...] = (
+    ray.exceptions.RayActorError,
+    ray.exceptions.ActorUnavailableError,
+    ray.exceptions.ObjectLostError,
+)
+"""Failures of the machinery, not of the trial: the run ends KILLED and Ray retries the task."""
+SPEC_PARAMS: tuple[str, ...] = (
+    "approach",
+    "fitness",
+    "mode",
+    "evaluations",
+    "batch_size",
+    "seed",
+    "n_angles",
+    "target",
+)
+"""The TrialSpec fields logged as params of every trial run."""
+
+
+@dataclass(frozen=True)
+class TrialJob:
+    """Everything a trial task needs, resolved by the driver.
+
+    Attributes:
+        tracking_uri: absolute MLflow tracking URI.
+        experiment_id: the grid's experiment.
+        parent_run_id: the grid's parent run.
+        grid_id: the grid id.
+        trial_key: e.g. "MAP-LIS/Fp/03".
+        trial_index: the trial's index within its cell.
+        spec: the trial to run.
+        out_dir: absolute folder for the trial's files and checkpoints.
+        evaluators: evaluator actors (K).
+        cpus_per_evaluator: CPUs each actor reserves.
+    """
+
+    tracking_uri: str
+    experiment_id: str
+    parent_run_id: str
+    grid_id: str
+    trial_key: str
+    trial_index: int
+    spec: TrialSpec
+    out_dir: str
+    evaluators: int
+    cpus_per_evaluator: float
+
+    def tags(self) -> dict[str, str]:
+        """Returns the tags of the trial's MLflow run (host and Ray node: where it runs)."""
+        return {
+            "mlflow.parentRunId": self.parent_run_id,
+            "linkevo.kind": "trial",
+            "grid_id": self.grid_id,
+            "trial_key": self.trial_key,
+            "approach": self.spec.approach,
+            "fitness": self.spec.fitness,
+            "seed": str(self.spec.seed),
+            "trial_index": str(self.trial_index),
+            "host": socket.gethostname(),
+            "ray_node": ray.get_runtime_context().get_node_id(),
+        }
+
+
+@dataclass(frozen=True)
+class TrialOutcome:
+    """How one trial ended.
+
+    Attributes:
+        trial_key: the trial.
+        status: "FINISHED" or "FAILED".
+        run_id: its MLflow run.
+        best_loss: the final best (first-objective) loss, when the run logged one.
+        evaluations: evaluations done, when the run logged them.
+        seconds: wall time of this attempt.
+        error: the failure message ("" when FINISHED).
+    """
+
+    trial_key: str
+    status: str
+    run_id: str
+    best_loss: float | None
+    evaluations: int | None
+    seconds: float
+    error: str = ""
+
+
+def trial_runs(
+    client: MlflowClient,
+    experiment_id: str,
+    grid_id: str,
+    *,
+    trial_key: str | None = None,
+    status: str | None = None,
+) -> list[Run]:
+    """Returns the grid's trial runs, optionally of one trial key and/or one status."""
+    clauses = [f"tags.grid_id = '{grid_id}'", "tags.`linkevo.kind` = 'trial'"]
+    if trial_key is not None:
+        clauses.append(f"tags.trial_key = '{trial_key}'")
+    if status is not None:
+        clauses.append(f"attributes.status = '{status}'")
+    runs: list[Run] = []
+    token = None
+    while True:
+        page = client.search_runs(
+            [experiment_id], " and ".join(clauses), max_results=1000, page_token=token
+        )
+        runs.extend(page)
+        token = page.token
+        if not token:
+            return runs
+
+
+def end_run(client: MlflowClient, run_id: str, status: str, message: str = "") -> None:
+    """Ends a run with `status`, tagging `error` with the (truncated) message if any."""
+    if message:
+        client.set_tag(run_id, "error", message[:ERROR_TAG_CHARS])
+    client.set_terminated(run_id, status)
+
+
+def outcome_of(run: Run, seconds: float = 0.0) -> TrialOutcome:
+    """Returns the outcome a finished or failed trial run records."""
+    metrics = run.data.metrics
+    evaluations = metrics.get("evaluations")
+    return TrialOutcome(
+        trial_key=run.data.tags["trial_key"],
+        status=run.info.status,
+        run_id=run.info.run_id,
+        best_loss=metrics.get("best_loss"),
+        evaluations=None if evaluations is None else int(evaluations),
+        seconds=seconds,
+        error=run.data.tags.get("error", ""),
+    )
+
+
+def _describe(exc: BaseException) -> str:
+    return f"{type(exc).__name__}: {exc}"
+
+
+def _flush_quietly(recorder: MlflowRecorder) -> None:
+    # The trial already failed; its own error is the one to report.
+    with contextlib.suppress(Exception):
+        recorder.flush()
+
+
+def run_trial_job(job: TrialJob) -> TrialOutcome:
+    """Runs one trial as a nested MLflow run; the body of the Ray trial task.
+
+    A trial already FINISHED (an earlier attempt that ended just before its node died) is
+    returned as is; an earlier attempt left RUNNING is marked KILLED. The trial resumes
+    from its checkpoint in `job.out_dir` when one exists, replaying the checkpointed
+    metrics into the new run. A trial error ends the run FAILED
+    and is returned, not raised; a lost actor ends it KILLED and is raised so Ray retries.
+    A run that a resuming driver marked KILLED meanwhile is not marked FINISHED.
+    """
+    client = MlflowClient(job.tracking_uri)
+    earlier = trial_runs(client, job.experiment_id, job.grid_id, trial_key=job.trial_key)
+    for run in earlier:
+        if run.info.status == "FINISHED":
+            return outcome_of(run)
+    for run in earlier:
+        if run.info.status == "RUNNING":
+            end_run(client, run.info.run_id, "KILLED", "superseded by a retried attempt")
+    run_id = client.create_run(
+        job.experiment_id, run_name=job.trial_key, tags=job.tags()
+    ).info.run_id
+    spec_values = asdict(job.spec)
+    client.log_batch(run_id, params=[Param(k, str(spec_values[k])) for k in SPEC_PARAMS])
+    start = time.monotonic()
+    evaluator: ActorPoolEvaluator | None = None
+    recorder = MlflowRecorder(client, run_id)
+    try:
+        out_dir = Path(job.out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        evaluator = ActorPoolEvaluator.start(
+            n_actors=job.evaluators,
+            cpus_per_actor=job.cpus_per_evaluator,
+            fitness=job.spec.eval_fitness,
+            mode=job.spec.mode,
+            target=job.spec.target,
+            n_angles=job.spec.n_angles,
+            placement_group=ray.util.get_current_placement_group(),
+        )
+        run_trial(job.spec, evaluator, recorder, out_dir, resume=True)
+    except RETRYABLE_ERRORS as exc:
+        _flush_quietly(recorder)
+        end_run(client, run_id, "KILLED", _describe(exc))
+        raise
+    except Exception as exc:
+        _flush_quietly(recorder)
+        end_run(client, run_id, "FAILED", _describe(exc))
+        return outcome_of(client.get_run(run_id), time.monotonic() - start)
+    finally:
+        if evaluator is not None:
+            evaluator.close()
+    if client.get_run(run_id).info.status == "RUNNING":
+        client.set_terminated(run_id, "FINISHED")
+    return outcome_of(client.get_run(run_id), time.monotonic() - start)
