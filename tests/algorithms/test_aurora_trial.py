@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 
@@ -21,21 +20,6 @@ OPTIONS = {
     "ae_batch_size": 64,
     "learning_rate": 0.01,
 }
-
-
-class CrashingEvaluator:
-    """Evaluates normally, then raises on call number `fail_at` (a crash mid-trial)."""
-
-    def __init__(self, inner: LocalEvaluator, fail_at: int) -> None:
-        self.inner = inner
-        self.calls = 0
-        self.fail_at = fail_at
-
-    def __call__(self, genomes: np.ndarray):
-        self.calls += 1
-        if self.calls == self.fail_at:
-            raise RuntimeError("evaluator crashed")
-        return self.inner(genomes)
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:
@@ -56,7 +40,9 @@ def spec() -> TrialSpec:
     )
 
 
-def test_map_au_trial_reports_training_and_resumes_exactly(spec: TrialSpec, tmp_path) -> None:
+def test_map_au_trial_reports_training_and_resumes_exactly(
+    spec: TrialSpec, tmp_path, crashing_evaluator
+) -> None:
     evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
     run_trial(spec, evaluator, NullRecorder(), tmp_path / "whole")
     whole = read_rows(tmp_path / "whole" / "metrics.csv")
@@ -69,7 +55,7 @@ def test_map_au_trial_reports_training_and_resumes_exactly(spec: TrialSpec, tmp_
     assert [r["elites_dropped"] != "nan" for r in whole] == [False, False, True, False, True, False]
 
     with pytest.raises(RuntimeError, match="evaluator crashed"):
-        run_trial(spec, CrashingEvaluator(evaluator, fail_at=6), NullRecorder(), tmp_path / "cut")
+        run_trial(spec, crashing_evaluator(evaluator, fail_at=6), NullRecorder(), tmp_path / "cut")
     result = run_trial(spec, evaluator, NullRecorder(), tmp_path / "cut", resume=True)
     assert result.iterations == 6
     assert read_rows(tmp_path / "cut" / "metrics.csv") == whole

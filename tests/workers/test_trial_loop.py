@@ -36,21 +36,6 @@ class ListRecorder:
         self.artifacts.append(out_dir)
 
 
-class FailingEvaluator:
-    """Evaluates normally, then raises on call number `fail_at` (a crash mid-trial)."""
-
-    def __init__(self, inner: LocalEvaluator, fail_at: int) -> None:
-        self.inner = inner
-        self.calls = 0
-        self.fail_at = fail_at
-
-    def __call__(self, genomes: np.ndarray):
-        self.calls += 1
-        if self.calls == self.fail_at:
-            raise RuntimeError("evaluator crashed")
-        return self.inner(genomes)
-
-
 def spec_for(approach: str, **changes) -> TrialSpec:
     values = {
         "approach": approach,
@@ -135,11 +120,13 @@ def test_same_seed_same_metrics_other_seed_differs(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize("approach", ["EA", "NSGA2", "MAP-ST"])
-def test_resume_continues_exactly_as_an_uninterrupted_run(approach: str, tmp_path: Path) -> None:
+def test_resume_continues_exactly_as_an_uninterrupted_run(
+    approach: str, tmp_path: Path, crashing_evaluator
+) -> None:
     spec = spec_for(approach, evaluations=7 * BATCH)
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "whole")
 
-    crashing = FailingEvaluator(evaluator_for(spec), fail_at=6)
+    crashing = crashing_evaluator(evaluator_for(spec), fail_at=6)
     with pytest.raises(RuntimeError, match="evaluator crashed"):
         run_trial(spec, crashing, NullRecorder(), tmp_path / "cut")
     assert len(read_rows(tmp_path / "cut" / "metrics.csv")) == 1 + 5  # rows beyond the checkpoint

@@ -1,0 +1,29 @@
+"""Fixtures shared by every test package."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+
+class CrashingEvaluator:
+    """Evaluates normally, then raises on call number `fail_at` (a crash mid-trial)."""
+
+    def __init__(self, inner: Callable, fail_at: int) -> None:
+        self.inner = inner
+        self.calls = 0
+        self.fail_at = fail_at
+
+    def __call__(self, genomes: np.ndarray):
+        self.calls += 1
+        if self.calls == self.fail_at:
+            raise RuntimeError("evaluator crashed")
+        return self.inner(genomes)
+
+
+@pytest.fixture
+def crashing_evaluator() -> type[CrashingEvaluator]:
+    """Returns the CrashingEvaluator class: `crashing_evaluator(inner, fail_at=k)`."""
+    return CrashingEvaluator
