@@ -26,6 +26,7 @@ from pathlib import Path
 import numba
 import numpy as np
 import ray
+from timing import best_seconds
 
 from sim import evaluate, named_target, random_genomes
 from sim.reference import evaluate_reference
@@ -42,22 +43,10 @@ REFERENCE_GENOMES = 100
 REPO = Path(__file__).resolve().parent.parent
 
 
-def best_seconds(fn, repeats: int = REPEATS) -> float:
-    """Returns the best wall time of `fn()` over `repeats` calls, after one warm-up (the
-    least disturbed by other load on a shared machine)."""
-    fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
-
-
 def actor_scaling(genomes: np.ndarray) -> None:
     """Prints evaluations per second through 1 and 2 actors and the two baselines."""
     numba.set_num_threads(1)
-    local = best_seconds(lambda: evaluate(genomes, "Fp"))
+    local = best_seconds(lambda: evaluate(genomes, "Fp"), REPEATS)
     few = genomes[:REFERENCE_GENOMES]
     start = time.perf_counter()
     evaluate_reference(few, "Fp", target=named_target("D16"))
@@ -67,7 +56,7 @@ def actor_scaling(genomes: np.ndarray) -> None:
         with ActorPoolEvaluator.start(
             n_actors=k, cpus_per_actor=1, fitness="Fp", mode="paper", target="D16", n_angles=40
         ) as evaluator:
-            rates[k] = len(genomes) / best_seconds(lambda ev=evaluator: ev(genomes))
+            rates[k] = len(genomes) / best_seconds(lambda ev=evaluator: ev(genomes), REPEATS)
     local_rate = len(genomes) / local
     print(f"## 1. evaluation throughput, batch {len(genomes)} (best of {REPEATS})")
     print(f"plain reference (sim.reference, 1 linkage at a time): {reference_rate:12,.0f} eval/s")

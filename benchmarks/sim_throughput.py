@@ -12,24 +12,14 @@ import argparse
 import json
 import os
 import platform
-import time
 
 import numba
 import numpy as np
+from timing import best_seconds
 
 from sim.evaluate import evaluate
 from sim.genome import random_genomes
 from sim.reference import evaluate_reference
-
-
-def best_seconds(fn, repeats: int) -> float:
-    """Returns the fastest wall time of `repeats` calls of fn()."""
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return min(times)
 
 
 def main() -> None:
