@@ -7,9 +7,8 @@ import math
 import numpy as np
 
 from sim.decode import BEAM_KINDS, NODE_KINDS, check_mode, decode
-from sim.evaluate import evaluate
 from sim.genome import N_GENES, validate_genomes
-from sim.kinematics import DEFAULT_ANGLES
+from sim.kinematics import DEFAULT_ANGLES, simulate
 
 FORMAT = "linkevo.linkage/1"
 DEFAULT_UNIT_MM = 8.0
@@ -38,7 +37,9 @@ def to_document(
     """
     genomes = validate_genomes(np.asarray(genome, dtype=np.float64).reshape(1, -1))
     batch = decode(genomes, mode)
-    ev = evaluate(genomes, "Fp", mode, n_angles=n_angles)
+    motion = simulate(batch, n_angles)
+    foot = int(motion.foot[0])
+    foot_x, foot_y = motion.positions[0, foot].T
     nodes = [
         {
             "id": j,
@@ -66,13 +67,13 @@ def to_document(
         "genome": genomes[0].tolist(),
         "n_angles": n_angles,
         "crank": {"motor": 0, "tip": 4, "length": beams[0]["length"]},
-        "foot": int(ev.foot[0]),
-        "error": int(ev.error[0]),
+        "foot": foot,
+        "error": int(motion.error[0]),
         "nodes": nodes,
         "beams": beams,
         "foot_path": {
-            "x": [None if math.isnan(v) else float(v) for v in ev.foot_x[0]],
-            "y": [None if math.isnan(v) else float(v) for v in ev.foot_y[0]],
+            "x": [None if math.isnan(v) else float(v) for v in foot_x],
+            "y": [None if math.isnan(v) else float(v) for v in foot_y],
         },
         "meta": dict(meta or {}),
     }

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from sim.decode import decode
-from sim.evaluate import evaluate
 from sim.genome import validate_genomes
 from sim.kinematics import DEFAULT_ANGLES, simulate
+from workers.artifacts import atomic_path
 
 SUFFIXES = (".png", ".gif")
 
@@ -34,24 +34,23 @@ def draw_linkage(
     genomes = validate_genomes(np.asarray(genome, dtype=np.float64).reshape(1, -1))
     batch = decode(genomes, mode)
     motion = simulate(batch, n_angles)
-    ev = evaluate(genomes, "Fp", mode, n_angles=n_angles)
+    foot = int(motion.foot[0])
     valid = np.flatnonzero(motion.valid[0])
-    title = title or f"{mode} mode, foot node {int(ev.foot[0])}, error {int(ev.error[0])}"
-    tmp = path.with_name(f".{path.name}.tmp")
-    if path.suffix.lower() == ".png":
-        fig = _figure(batch, motion, ev, int(valid[0]), title)
-        fig.savefig(tmp, format="png", dpi=120)
-        _close(fig)
-    else:
-        frames = [_frame_image(_figure(batch, motion, ev, int(k), title)) for k in valid]
-        frames[0].save(
-            tmp, format="gif", save_all=True, append_images=frames[1:], duration=80, loop=0
-        )
-    tmp.replace(path)
+    title = title or f"{mode} mode, foot node {foot}, error {int(motion.error[0])}"
+    with atomic_path(path) as tmp:
+        if path.suffix.lower() == ".png":
+            fig = _figure(batch, motion, int(valid[0]), title)
+            fig.savefig(tmp, format="png", dpi=120)
+            _close(fig)
+        else:
+            frames = [_frame_image(_figure(batch, motion, int(k), title)) for k in valid]
+            frames[0].save(
+                tmp, format="gif", save_all=True, append_images=frames[1:], duration=80, loop=0
+            )
     return path
 
 
-def _figure(batch, motion, ev, k: int, title: str):
+def _figure(batch, motion, k: int, title: str):
     """Returns a matplotlib figure of linkage 0 of `batch` at sample k."""
     import matplotlib
 
@@ -64,7 +63,8 @@ def _figure(batch, motion, ev, k: int, title: str):
     lo, hi = finite.min(axis=0) - 1.5, finite.max(axis=0) + 1.5
     crank = batch.node_float[0, 4, 0]
     ax.add_patch(plt.Circle((0, 0), crank, fill=False, ls=":", color="0.6"))
-    ax.plot(ev.foot_x[0], ev.foot_y[0], "-x", color="tab:red", ms=4, lw=1, label="foot path")
+    foot = int(motion.foot[0])
+    ax.plot(*pos[foot].T, "-x", color="tab:red", ms=4, lw=1, label="foot path")
     for b in range(int(batch.n_beams[0])):
         s, e = batch.beam_start[0, b], batch.beam_end[0, b]
         ax.plot(*zip(pos[s, k], pos[e, k], strict=True), "-", color="0.25", lw=2.5, zorder=2)
@@ -75,7 +75,6 @@ def _figure(batch, motion, ev, k: int, title: str):
     ax.scatter(
         *pos[0, k], s=140, marker="o", c="tab:orange", edgecolors="k", zorder=4, label="motor"
     )
-    foot = int(ev.foot[0])
     ax.scatter(*pos[foot, k], s=90, marker="*", c="tab:red", zorder=5, label="foot")
     ax.set_xlim(lo[0], hi[0])
     ax.set_ylim(lo[1], hi[1])
