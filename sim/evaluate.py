@@ -7,7 +7,7 @@ import numpy as np
 
 from sim import kernels
 from sim.decode import check_mode
-from sim.evaluation import Evaluation
+from sim.evaluation import Evaluation, field_shapes
 from sim.fitness import FITNESS_CODES, N_OBJECTIVES, Target, check_fitness, named_target
 from sim.genome import validate_genomes
 from sim.kinematics import DEFAULT_ANGLES, check_angles
@@ -19,6 +19,7 @@ def evaluate(
     mode: str = "paper",
     target: Target | str | None = None,
     n_angles: int = DEFAULT_ANGLES,
+    out: Evaluation | None = None,
 ) -> Evaluation:
     """Returns the Evaluation of genomes (N, 56): losses, errors, foot paths, descriptors.
 
@@ -28,10 +29,14 @@ def evaluate(
         mode: "paper" (default) or "legacy".
         target: F_p target points, or a published name ("D16", "D24"); None is "D16".
         n_angles: crank angles per turn, A.
+        out: where to write the results (then returned), e.g. from `Evaluation.empty`;
+            its arrays must have the shapes and dtypes of this call's result. None
+            allocates new arrays.
 
     Raises:
         ValueError: for bad genomes (`sim.genome.GenomeError`), an unknown fitness or
-            mode, or n_angles < 2; raised before any work starts.
+            mode, n_angles < 2 or an `out` of the wrong layout; raised before any work
+            starts.
     """
     legacy = check_mode(mode)
     check_fitness(fitness)
@@ -43,29 +48,36 @@ def evaluate(
         raise ValueError(f"target must be a Target or a published name, got {target!r}")
     n = genomes.shape[0]
     n_obj = N_OBJECTIVES[fitness]
-    loss = np.empty((n, n_obj))
-    error = np.empty(n, np.int64)
-    angle_error = np.empty(n)
-    valid = np.empty((n, n_angles), np.bool_)
-    foot = np.empty(n, np.int64)
-    foot_x = np.empty((n, n_angles))
-    foot_y = np.empty((n, n_angles))
-    wh = np.empty((n, 2))
-    lis = np.empty((n, 2))
-    st = np.empty((n, 4))
+    if out is None:
+        out = Evaluation.empty(n, n_angles, n_obj)
+    else:
+        check_out(out, n, n_angles, n_obj)
     if n:
+        d = out.descriptors
         kernels.evaluate_batch(
             genomes, legacy, n_angles, FITNESS_CODES[fitness], target.points, target.is_step,
             min(n, 16 * numba.get_num_threads()),
-            loss, error, angle_error, valid, foot, foot_x, foot_y, wh, lis, st,
+            out.loss.reshape(n, n_obj), out.error, out.angle_error, out.valid, out.foot,
+            out.foot_x, out.foot_y, d["MAP-WH"], d["MAP-LIS"], d["MAP-ST"],
         )  # fmt: skip
-    return Evaluation(
-        loss=loss[:, 0] if n_obj == 1 else loss,
-        error=error,
-        angle_error=angle_error,
-        valid=valid,
-        foot=foot,
-        foot_x=foot_x,
-        foot_y=foot_y,
-        descriptors={"MAP-WH": wh, "MAP-LIS": lis, "MAP-ST": st},
-    )
+    return out
+
+
+def check_out(out: Evaluation, n: int, n_angles: int, n_objectives: int) -> None:
+    """Raises ValueError unless `out` holds writable, C-contiguous arrays of the shapes and
+    dtypes of an Evaluation of n genomes over n_angles with n_objectives losses."""
+    arrays = out.arrays()
+    for name, shape, dtype in field_shapes(n, n_angles, n_objectives):
+        array = arrays.get(name)
+        if not (
+            isinstance(array, np.ndarray)
+            and array.shape == shape
+            and array.dtype == dtype
+            and array.flags.c_contiguous
+            and array.flags.writeable
+        ):
+            got = repr(array) if not isinstance(array, np.ndarray) else (array.shape, array.dtype)
+            raise ValueError(
+                f"out {name} must be a writable C-contiguous {np.dtype(dtype)} array of "
+                f"shape {shape}, got {got}"
+            )

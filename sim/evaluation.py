@@ -11,6 +11,34 @@ Mode = Literal["paper", "legacy"]
 MODES: tuple[str, ...] = ("paper", "legacy")
 Fitness = Literal["Fp", "Fsl", "Fp2", "Fsl2"]
 FITNESSES: tuple[str, ...] = ("Fp", "Fsl", "Fp2", "Fsl2")
+DESCRIPTOR_WIDTHS: dict[str, int] = {"MAP-WH": 2, "MAP-LIS": 2, "MAP-ST": 4}
+"""Columns of each approach's continuous descriptor array."""
+ALIGNMENT = 64
+"""Byte alignment of each array laid out in a shared buffer (a cache line)."""
+
+
+def field_shapes(
+    n: int, n_angles: int, n_objectives: int
+) -> list[tuple[str, tuple[int, ...], type]]:
+    """Returns (name, shape, dtype) of every Evaluation array for n genomes, in layout order.
+
+    Descriptor arrays are named after their approach ("MAP-WH", ...).
+    """
+    loss_shape = (n,) if n_objectives == 1 else (n, n_objectives)
+    return [
+        ("loss", loss_shape, np.float64),
+        ("error", (n,), np.int64),
+        ("angle_error", (n,), np.float64),
+        ("foot", (n,), np.int64),
+        ("foot_x", (n, n_angles), np.float64),
+        ("foot_y", (n, n_angles), np.float64),
+        *((name, (n, width), np.float64) for name, width in DESCRIPTOR_WIDTHS.items()),
+        ("valid", (n, n_angles), np.bool_),
+    ]
+
+
+def _aligned(nbytes: int) -> int:
+    return -(-nbytes // ALIGNMENT) * ALIGNMENT
 
 
 @dataclass(frozen=True)
@@ -37,6 +65,39 @@ class Evaluation:
     foot_x: np.ndarray
     foot_y: np.ndarray
     descriptors: dict[str, np.ndarray]
+
+    @staticmethod
+    def nbytes_for(n: int, n_angles: int, n_objectives: int) -> int:
+        """Returns the bytes `Evaluation.empty(..., buffer=...)` lays out for n genomes."""
+        return sum(
+            _aligned(int(np.prod(shape)) * np.dtype(dtype).itemsize)
+            for _, shape, dtype in field_shapes(n, n_angles, n_objectives)
+        )
+
+    @staticmethod
+    def empty(
+        n: int, n_angles: int, n_objectives: int, buffer: object = None, offset: int = 0
+    ) -> Evaluation:
+        """Returns an uninitialised Evaluation of n genomes, for `sim.evaluate(out=...)`.
+
+        With `buffer` (any writable buffer, e.g. an mmap of at least `offset +
+        nbytes_for(...)` bytes) the arrays are views laid out in it from `offset`, each on
+        a 64-byte boundary; otherwise they are fresh arrays.
+        """
+        arrays = {}
+        for name, shape, dtype in field_shapes(n, n_angles, n_objectives):
+            if buffer is None:
+                arrays[name] = np.empty(shape, dtype)
+                continue
+            arrays[name] = np.ndarray(shape, dtype, buffer, offset)
+            offset += _aligned(int(np.prod(shape)) * np.dtype(dtype).itemsize)
+        descriptors = {name: arrays.pop(name) for name in DESCRIPTOR_WIDTHS}
+        return Evaluation(**arrays, descriptors=descriptors)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Returns every array by its `field_shapes` name (descriptors by approach)."""
+        flat = {k: v for k, v in vars(self).items() if k != "descriptors"}
+        return {**flat, **self.descriptors}
 
     def __len__(self) -> int:
         return int(self.error.shape[0])

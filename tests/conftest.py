@@ -27,3 +27,13 @@ class CrashingEvaluator:
 def crashing_evaluator() -> type[CrashingEvaluator]:
     """Returns the CrashingEvaluator class: `crashing_evaluator(inner, fail_at=k)`."""
     return CrashingEvaluator
+
+
+@pytest.fixture(scope="module")
+def ray_local():
+    """One small local Ray instance for the whole test module."""
+    import ray
+
+    ray.init(num_cpus=2, object_store_memory=200 * 1024**2, include_dashboard=False)
+    yield ray
+    ray.shutdown()

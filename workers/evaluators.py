@@ -10,7 +10,8 @@ import numpy as np
 
 from sim.evaluate import evaluate
 from sim.evaluation import Evaluation
-from sim.fitness import NAMED_TARGETS, Target, named_target
+from sim.fitness import N_OBJECTIVES, NAMED_TARGETS, Target, named_target
+from workers.result_pool import MemoryBuffer, ResultPool
 
 
 class Evaluator(Protocol):
@@ -46,6 +47,9 @@ def resolve_target(target: str) -> Target:
 class LocalEvaluator:
     """Evaluates in this process with `sim.evaluate` (numba threads over the batch).
 
+    Results go into reused buffers (`workers.result_pool`): a buffer is written again
+    only once none of its arrays is referenced, so results may be kept indefinitely.
+
     Args:
         fitness: the `sim.evaluate` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
         mode: "paper" or "legacy".
@@ -58,13 +62,18 @@ class LocalEvaluator:
         self.mode = mode
         self.target = resolve_target(target)
         self.n_angles = n_angles
+        shape = (n_angles, N_OBJECTIVES.get(fitness, 1))
+        self._buffers = ResultPool(lambda n: MemoryBuffer(n, *shape))
 
-    def __call__(self, genomes: np.ndarray) -> Evaluation:
-        """Returns the evaluation of genomes (B, 56)."""
+    def __call__(self, genomes: np.ndarray, out: Evaluation | None = None) -> Evaluation:
+        """Returns the evaluation of genomes (B, 56), written into `out` when given."""
+        if out is None and len(genomes):
+            out = self._buffers.free(len(genomes)).evaluation().take(slice(0, len(genomes)))
         return evaluate(
             genomes,
             fitness=self.fitness,
             mode=self.mode,
             target=self.target,
             n_angles=self.n_angles,
+            out=out,
         )

@@ -1,4 +1,8 @@
-"""Provides evaluator actors and the evaluator that splits a batch across K of them."""
+"""Provides evaluator actors and the evaluator that splits a batch across K of them.
+
+Actors on the caller's Ray node exchange batches through a `SharedBatch` file; others
+through the object store (docs/grid.md, "Evaluator transport").
+"""
 
 from __future__ import annotations
 
@@ -8,7 +12,10 @@ from ray.util.placement_group import PlacementGroup
 from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
 from sim.evaluation import Evaluation
+from sim.fitness import N_OBJECTIVES
 from workers.evaluators import LocalEvaluator
+from workers.result_pool import KEEP, ResultPool
+from workers.shared_batch import SharedBatch, SharedLayout, shared_memory_available
 
 
 class EvaluatorWorker:
@@ -27,10 +34,28 @@ class EvaluatorWorker:
 
         numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
         self._evaluate = LocalEvaluator(fitness, mode, target, n_angles)
+        self._attached: dict[SharedLayout, SharedBatch] = {}
 
     def evaluate(self, genomes: np.ndarray) -> Evaluation:
         """Returns the evaluation of `genomes` (B, 56)."""
         return self._evaluate(genomes)
+
+    def evaluate_shared(self, layout: tuple, start: int, stop: int) -> bool:
+        """Evaluates rows start:stop of a SharedBatch's genomes into its Evaluation.
+
+        `layout` is `SharedLayout.as_tuple()`. Returns False, doing nothing, when the batch
+        lives on another Ray node. The last KEEP batches stay mapped.
+        """
+        found = SharedLayout(*layout)
+        if found.node_id != ray.get_runtime_context().get_node_id():
+            return False
+        batch = self._attached.pop(found, None) or SharedBatch.attach(found)
+        self._attached[found] = batch  # most recently used last
+        while len(self._attached) > KEEP:
+            del self._attached[next(iter(self._attached))]
+        rows = slice(start, stop)
+        self._evaluate(batch.genomes[rows], out=batch.evaluation().take(rows))
+        return True
 
 
 class ActorPoolEvaluator:
@@ -38,13 +63,41 @@ class ActorPoolEvaluator:
 
     The batch is cut into K contiguous parts (one per actor), evaluated concurrently and
     concatenated back in order, so the result equals one in-process `sim.evaluate` call.
-    Use `start` to create the actors; `close` (or the context manager) kills them.
+    With `shared_memory` (and a writable /dev/shm), the genomes and results pass through
+    a `SharedBatch` file and the returned Evaluation's arrays are views into it; the file
+    is reused only once none of them is alive any more, so a caller may keep results as
+    long as it likes (a new file is made meanwhile). An actor on another node gets and
+    returns its part through the object store instead. Use `start` to create the actors;
+    `close` (or the context manager) kills them and deletes the files.
+
+    Args:
+        actors: `EvaluatorWorker` actors, all with the same settings.
+        n_angles: their crank angles per linkage.
+        n_objectives: their losses per genome (1, or 2 for Fp2/Fsl2).
+        shared_memory: pass batches through a shared-memory file where possible.
+
+    Attributes:
+        parts_by_transport: how many batch parts went through "shared-file" and
+            "object-store" so far.
     """
 
-    def __init__(self, actors: list[ray.actor.ActorHandle]):
+    def __init__(
+        self,
+        actors: list[ray.actor.ActorHandle],
+        *,
+        n_angles: int,
+        n_objectives: int,
+        shared_memory: bool = True,
+    ):
         if not actors:
             raise ValueError("ActorPoolEvaluator needs at least one actor")
         self._actors = actors
+        self._n_angles = n_angles
+        self._n_objectives = n_objectives
+        self._batches: ResultPool | None = None
+        if shared_memory and shared_memory_available():
+            self._batches = ResultPool(self._new_batch)
+        self.parts_by_transport = {"shared-file": 0, "object-store": 0}
 
     @classmethod
     def start(
@@ -57,6 +110,7 @@ class ActorPoolEvaluator:
         target: str,
         n_angles: int,
         placement_group: PlacementGroup | None = None,
+        shared_memory: bool = True,
     ) -> ActorPoolEvaluator:
         """Returns an evaluator with `n_actors` new actors reserving `cpus_per_actor` each.
 
@@ -90,7 +144,12 @@ class ActorPoolEvaluator:
                     threads=max(1, int(cpus_per_actor)),
                 )
             )
-        return cls(actors)
+        return cls(
+            actors,
+            n_angles=n_angles,
+            n_objectives=N_OBJECTIVES[fitness],
+            shared_memory=shared_memory,
+        )
 
     @property
     def n_actors(self) -> int:
@@ -99,18 +158,44 @@ class ActorPoolEvaluator:
 
     def __call__(self, genomes: np.ndarray) -> Evaluation:
         """Returns the evaluation of `genomes` (B, 56), rows in input order."""
-        n_parts = min(len(self._actors), max(len(genomes), 1))
-        parts = np.array_split(genomes, n_parts)
+        n = len(genomes)
+        n_parts = min(len(self._actors), max(n, 1))
+        rows = [slice(n * i // n_parts, n * (i + 1) // n_parts) for i in range(n_parts)]
+        actors = self._actors[:n_parts]
+        if self._batches is None or n == 0:
+            refs = [a.evaluate.remote(genomes[r]) for a, r in zip(actors, rows, strict=True)]
+            self.parts_by_transport["object-store"] += len(refs)
+            return Evaluation.concat(ray.get(refs))
+        shared = self._batches.free(n)
+        shared.genomes[:n] = genomes
+        layout = shared.layout.as_tuple()
         refs = [
-            actor.evaluate.remote(part) for actor, part in zip(self._actors, parts, strict=False)
+            a.evaluate_shared.remote(layout, r.start, r.stop)
+            for a, r in zip(actors, rows, strict=True)
         ]
-        return Evaluation.concat(ray.get(refs))
+        done = ray.get(refs)
+        result = shared.evaluation().take(slice(0, n))
+        missing = [i for i, ok in enumerate(done) if not ok]
+        remote = [actors[i].evaluate.remote(genomes[rows[i]]) for i in missing]
+        for i, part in zip(missing, ray.get(remote), strict=True):
+            rows_out = result.take(rows[i]).arrays()
+            for name, values in part.arrays().items():
+                rows_out[name][...] = values
+        self.parts_by_transport["object-store"] += len(missing)
+        self.parts_by_transport["shared-file"] += len(rows) - len(missing)
+        return result
+
+    def _new_batch(self, n: int) -> SharedBatch:
+        node = ray.get_runtime_context().get_node_id()
+        return SharedBatch.create(node, n, self._n_angles, self._n_objectives)
 
     def close(self) -> None:
         """Kills the actors (idempotent)."""
         for actor in self._actors:
             ray.kill(actor, no_restart=True)
         self._actors = []
+        if self._batches is not None:
+            self._batches.close()
 
     def __enter__(self) -> ActorPoolEvaluator:
         return self

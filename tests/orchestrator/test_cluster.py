@@ -74,3 +74,41 @@ def test_grid_survives_removing_a_worker_node(cluster, tmp_path):
     for runs in by_key.values():
         assert [status for _, status in runs].count("FINISHED") == 1
     assert sorted(status for _, status in by_key[key]) == ["FINISHED", "KILLED"]
+
+
+def test_actors_on_other_nodes_get_their_rows_through_the_object_store(cluster):
+    import numpy as np
+    import ray
+    from ray.util.placement_group import (
+        placement_group,
+        placement_group_table,
+        remove_placement_group,
+    )
+
+    from sim import evaluate, random_genomes
+    from workers.ray_evaluator import ActorPoolEvaluator
+
+    group = placement_group([{"CPU": 1}, {"CPU": 1}], strategy="STRICT_SPREAD")
+    ray.get(group.ready(), timeout=60)
+    try:
+        nodes = set(placement_group_table(group)["bundles_to_node_id"].values())
+        assert len(nodes) == 2 and nodes - {ray.get_runtime_context().get_node_id()}
+        genomes = random_genomes(np.random.default_rng(11), 200)
+        with ActorPoolEvaluator.start(
+            n_actors=2,
+            cpus_per_actor=1,
+            fitness="Fp",
+            mode="paper",
+            target="D16",
+            n_angles=40,
+            placement_group=group,
+        ) as pool:
+            got = pool(genomes)
+            parts = dict(pool.parts_by_transport)
+        want = evaluate(genomes, "Fp")
+        np.testing.assert_array_equal(got.loss, want.loss)
+        np.testing.assert_array_equal(got.foot_y, want.foot_y)
+        local = int(ray.get_runtime_context().get_node_id() in nodes)
+        assert parts == {"shared-file": local, "object-store": 2 - local}
+    finally:
+        remove_placement_group(group)

@@ -1,0 +1,108 @@
+"""Tests the evaluator actors and both batch transports against in-process evaluation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sim import Evaluation, evaluate, random_genomes
+from workers.ray_evaluator import ActorPoolEvaluator, EvaluatorWorker
+from workers.result_pool import KEEP
+from workers.shared_batch import SHARED_DIR, SharedBatch, SharedLayout
+
+pytestmark = pytest.mark.ray
+
+
+def assert_same(got: Evaluation, expected: Evaluation) -> None:
+    """Asserts every field of two evaluations is identical (NaN where NaN)."""
+    for name in ("loss", "error", "angle_error", "valid", "foot", "foot_x", "foot_y"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(expected, name), err_msg=name)
+    assert got.descriptors.keys() == expected.descriptors.keys()
+    for name, values in expected.descriptors.items():
+        np.testing.assert_array_equal(got.descriptors[name], values, err_msg=name)
+
+
+def batch_files() -> set[str]:
+    return {p.name for p in SHARED_DIR.glob("linkevo-batch-*")}
+
+
+def start_pool(fitness: str, shared_memory: bool, n_actors: int = 2) -> ActorPoolEvaluator:
+    return ActorPoolEvaluator.start(
+        n_actors=n_actors,
+        cpus_per_actor=1,
+        fitness=fitness,
+        mode="paper",
+        target="D16",
+        n_angles=40,
+        shared_memory=shared_memory,
+    )
+
+
+@pytest.mark.parametrize("shared_memory", [True, False], ids=["shared-file", "object-store"])
+@pytest.mark.parametrize("fitness", ["Fp", "Fsl2"])
+def test_pool_equals_in_process_evaluation(ray_local, fitness, shared_memory):
+    genomes = random_genomes(np.random.default_rng(7), 301)
+    before = batch_files()
+    with start_pool(fitness, shared_memory) as pool:
+        first = pool(genomes)
+        assert_same(first, evaluate(genomes, fitness))
+        again = pool(genomes[::-1].copy())
+        assert_same(again, evaluate(genomes[::-1], fitness))
+        # A result still held is never overwritten by later batches.
+        assert_same(first, evaluate(genomes, fitness))
+        way = "shared-file" if shared_memory else "object-store"
+        assert pool.parts_by_transport[way] == 4 and sum(pool.parts_by_transport.values()) == 4
+        assert len(batch_files() - before) == (2 if shared_memory else 0)
+    assert batch_files() == before
+
+
+def test_batch_files_are_reused_once_results_are_dropped(ray_local):
+    rng = np.random.default_rng(3)
+    before = batch_files()
+    with start_pool("Fp", shared_memory=True) as pool:
+        small, large = random_genomes(rng, 10), random_genomes(rng, 500)
+        for _ in range(3):  # each result is dropped before the next call
+            assert_same(pool(small), evaluate(small, "Fp"))
+        assert len(batch_files() - before) == 1
+        assert_same(pool(large), evaluate(large, "Fp"))
+        assert len(batch_files() - before) == 2  # the first holds only 10 rows
+        files = batch_files()
+        assert_same(pool(small), evaluate(small, "Fp"))
+        assert batch_files() == files
+        held = [pool(large[k::7].copy()) for k in range(6)]
+        assert len(batch_files() - before) == KEEP  # older files unlinked
+        for k, result in enumerate(held):  # unlinked files stay mapped while held
+            assert_same(result, evaluate(large[k::7], "Fp"))
+        assert len(pool(small[:0])) == 0
+        one = small[:1]
+        assert_same(pool(one), evaluate(one, "Fp"))
+    assert batch_files() == before
+
+
+def test_actor_leaves_a_batch_on_another_node_alone(ray_local):
+    import ray
+
+    worker = (
+        ray.remote(EvaluatorWorker)
+        .options(num_cpus=1)
+        .remote(fitness="Fp", mode="paper", target="D16", n_angles=40, threads=1)
+    )
+    batch = SharedBatch.create("another-node", 20, 40, 1)
+    try:
+        batch.genomes[:] = random_genomes(np.random.default_rng(1), 20)
+        batch.evaluation().loss[:] = -1.0
+        assert ray.get(worker.evaluate_shared.remote(batch.layout.as_tuple(), 0, 20)) is False
+        np.testing.assert_array_equal(batch.evaluation().loss, -1.0)
+        here = SharedLayout(
+            **{**vars(batch.layout), "node_id": ray_local.get_runtime_context().get_node_id()}
+        )
+        assert ray.get(worker.evaluate_shared.remote(here.as_tuple(), 5, 20)) is True
+        np.testing.assert_array_equal(batch.evaluation().loss[:5], -1.0)
+        expected = evaluate(batch.genomes[5:], "Fp")
+        assert_same(batch.evaluation().take(slice(5, 20)), expected)
+    finally:
+        batch.release()
+        ray.kill(worker)
+    assert not Path(batch.layout.path).exists()
