@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 N_GENES = 56
@@ -36,6 +37,24 @@ def random_genomes(rng: np.random.Generator, n: int) -> np.ndarray:
     return rng.random((n, N_GENES))
 
 
+@numba.njit(cache=True, nogil=True)
+def first_outside_unit_interval(values: np.ndarray) -> int:
+    """Returns the index of the first value (1-D) not in [0, 1) (NaN included), or -1.
+
+    A trial checks every batch, so the common all-good case is one branch-free
+    (vectorised) pass; only a bad batch is searched again for the first bad value.
+    """
+    inside = 0
+    for i in range(values.shape[0]):
+        inside += (values[i] >= 0.0) & (values[i] < 1.0)  # NaN fails both comparisons
+    if inside == values.shape[0]:
+        return -1
+    for i in range(values.shape[0]):
+        if not (values[i] >= 0.0 and values[i] < 1.0):
+            return i
+    return -1
+
+
 def validate_genomes(genomes: object) -> np.ndarray:
     """Returns the genomes as a C-contiguous float64 array of shape (N, 56).
 
@@ -50,11 +69,11 @@ def validate_genomes(genomes: object) -> np.ndarray:
     if arr.dtype.kind not in "fiu":
         raise GenomeError(f"genomes must be a real float array, got dtype {arr.dtype}")
     arr = np.ascontiguousarray(arr, dtype=np.float64)
-    bad = ~np.isfinite(arr) | (arr < 0.0) | (arr >= 1.0)
-    if bad.any():
-        row, col = np.argwhere(bad)[0]
+    bad = first_outside_unit_interval(arr.reshape(-1))
+    if bad >= 0:
+        row, col = divmod(bad, N_GENES)
         raise GenomeError(
-            f"genome row {row}, gene {col} is {arr[row, col]!r}: "
+            f"genome row {row}, gene {col} is {float(arr[row, col])!r}: "
             "every gene must be a finite number in [0, 1)"
         )
     return arr

@@ -182,11 +182,12 @@ def circle_intersection(
         nudged = d - TOLERANCE
     elif d < abs(r0 - r1):
         nudged = d + TOLERANCE
-    ex = dx / nudged
-    ey = dy / nudged
+    inv = 1.0 / nudged
+    ex = dx * inv
+    ey = dy * inv
     if mode == "legacy" and abs(d - r0 + r1) < TOLERANCE:
         return (p0[0] + r0 * ex, p0[1] + r0 * ey)
-    a = (r0 * r0 - r1 * r1 + nudged * nudged) / (2.0 * nudged)
+    a = 0.5 * (r0 * r0 - r1 * r1 + nudged * nudged) * inv
     h = math.sqrt(max(r0 * r0 - a * a, 0.0))
     mx = p0[0] + a * ex
     my = p0[1] + a * ey
@@ -202,7 +203,8 @@ def unit_vector(start: Point, end: Point) -> Point:
     norm = math.sqrt(dx * dx + dy * dy)
     if norm == 0.0:
         return (1.0, 0.0)
-    return (dx / norm, dy / norm)
+    inv = 1.0 / norm
+    return (dx * inv, dy * inv)
 
 
 def beam_angle(start: Point, end: Point) -> float:

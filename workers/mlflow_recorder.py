@@ -11,39 +11,61 @@ from mlflow.utils.async_logging.run_operations import RunOperations
 
 ARTIFACT_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".json", ".png", ".gif", ".pt")
 """The trial files logged at the end; the checkpoint folder and temp files stay local."""
+SEND_EVERY_S = 2.0
+"""Seconds between metric sends: the MLflow UI and the grid's progress lag by at most this."""
+MAX_BATCH = 1000
+"""Metrics per `log_batch` call (MLflow's limit)."""
 
 
 class MlflowRecorder:
     """Logs a trial's per-iteration metrics and final files to an existing MLflow run.
 
-    Each iteration's metrics go out in one asynchronous `log_batch`, so the write overlaps
-    the next evaluation; `flush` (called by `log_artifacts`) waits for all of them and
-    raises if any failed.
+    The first iteration's metrics are sent at once (the run shows progress from the
+    start); later ones are gathered and sent every `send_every_s` seconds as asynchronous
+    `log_batch` calls, so the write overlaps the next evaluations. One `log_batch` costs
+    about 8 ms of Python (SQLAlchemy) on a sqlite store whatever its size up to a few
+    hundred metrics, and it holds the GIL while the trial loop runs, so one per iteration
+    would slow every iteration (docs/grid.md, "Evaluator transport"). `flush` (called by
+    `log_artifacts`, and by the trial task when a trial fails) sends what is gathered and
+    waits for every write, raising if one failed.
 
     Args:
         client: a client on the run's tracking URI.
         run_id: the run to log to.
+        send_every_s: seconds between sends (0 sends every iteration).
     """
 
-    def __init__(self, client: MlflowClient, run_id: str):
+    def __init__(self, client: MlflowClient, run_id: str, send_every_s: float = SEND_EVERY_S):
         self._client = client
         self._run_id = run_id
+        self._send_every_s = send_every_s
+        self._gathered: list[Metric] = []
+        self._sent_at = -float("inf")  # the first iteration goes out at once
         self._pending: list[RunOperations] = []
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
-        """Queues one iteration's metrics as one `log_batch`, with `step = iteration`."""
+        """Gathers one iteration's metrics with `step = iteration`; sends when it is time."""
         timestamp = int(time.time() * 1000)
-        batch = [
+        self._gathered += [
             Metric(key=name, value=float(value), timestamp=timestamp, step=int(iteration))
             for name, value in metrics.items()
         ]
-        if batch:
+        if time.monotonic() - self._sent_at >= self._send_every_s:
+            self._send()
+
+    def _send(self) -> None:
+        gathered, self._gathered = self._gathered, []
+        self._sent_at = time.monotonic()
+        for start in range(0, len(gathered), MAX_BATCH):
+            batch = gathered[start : start + MAX_BATCH]
             operation = self._client.log_batch(self._run_id, metrics=batch, synchronous=False)
             if operation is not None:
                 self._pending.append(operation)
 
     def flush(self) -> None:
-        """Waits until every queued metric batch is written (raises if one failed)."""
+        """Sends the gathered metrics and waits until every send is written (raises if one
+        failed)."""
+        self._send()
         pending, self._pending = self._pending, []
         for operation in pending:
             operation.wait()

@@ -1,10 +1,14 @@
 """Provides evaluator actors and the evaluator that splits a batch across K of them.
 
-Actors on the caller's Ray node exchange batches through a `SharedBatch` file; others
-through the object store (docs/grid.md, "Evaluator transport").
+Actors on the caller's Ray node exchange batches through a `SharedBatch` file and take
+requests on a side channel (`workers.channel`); others go through Ray's object store
+(docs/grid.md, "Evaluator transport").
 """
 
 from __future__ import annotations
+
+import os
+from multiprocessing.connection import Connection
 
 import numpy as np
 import ray
@@ -13,6 +17,8 @@ from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
 from sim.evaluation import Evaluation
 from sim.fitness import N_OBJECTIVES
+from sim.genome import validate_genomes
+from workers import channel
 from workers.evaluators import LocalEvaluator
 from workers.result_pool import KEEP, ResultPool
 from workers.shared_batch import SharedBatch, SharedLayout, shared_memory_available
@@ -32,13 +38,28 @@ class EvaluatorWorker:
     def __init__(self, *, fitness: str, mode: str, target: str, n_angles: int, threads: int):
         import numba
 
-        numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+        self._threads = max(1, min(threads, numba.config.NUMBA_NUM_THREADS))
+        numba.set_num_threads(self._threads)
         self._evaluate = LocalEvaluator(fitness, mode, target, n_angles)
         self._attached: dict[SharedLayout, SharedBatch] = {}
 
     def evaluate(self, genomes: np.ndarray) -> Evaluation:
         """Returns the evaluation of `genomes` (B, 56)."""
         return self._evaluate(genomes)
+
+    def open_channel(self, node_id: str, authkey: bytes) -> str | None:
+        """Serves `evaluate_shared` on a side channel for a caller on Ray node `node_id`.
+
+        Returns the channel's address, or None when this actor runs on another node.
+        """
+        if node_id != ray.get_runtime_context().get_node_id():
+            return None
+        import numba
+
+        def setup() -> None:
+            numba.set_num_threads(self._threads)  # numba's thread count is per thread
+
+        return channel.serve(self.evaluate_shared, authkey, setup)
 
     def evaluate_shared(self, layout: tuple, start: int, stop: int) -> bool:
         """Evaluates rows start:stop of a SharedBatch's genomes into its Evaluation.
@@ -66,9 +87,12 @@ class ActorPoolEvaluator:
     With `shared_memory` (and a writable /dev/shm), the genomes and results pass through
     a `SharedBatch` file and the returned Evaluation's arrays are views into it; the file
     is reused only once none of them is alive any more, so a caller may keep results as
-    long as it likes (a new file is made meanwhile). An actor on another node gets and
-    returns its part through the object store instead. Use `start` to create the actors;
-    `close` (or the context manager) kills them and deletes the files.
+    long as it likes (a new file is made meanwhile). Requests to actors on this node go
+    over a side channel (`workers.channel`), falling back to a Ray call when an actor's
+    channel is lost (Ray restarts the actor; the next batch opens a new channel). An actor
+    on another node gets and returns its part through the object store instead. Use
+    `start` to create the actors; `close` (or the context manager) kills them and deletes
+    the files.
 
     Args:
         actors: `EvaluatorWorker` actors, all with the same settings.
@@ -97,6 +121,8 @@ class ActorPoolEvaluator:
         self._batches: ResultPool | None = None
         if shared_memory and shared_memory_available():
             self._batches = ResultPool(self._new_batch)
+        self._channels: dict[int, Connection | None] = {}
+        self._authkey = os.urandom(32)
         self.parts_by_transport = {"shared-file": 0, "object-store": 0}
 
     @classmethod
@@ -152,12 +178,17 @@ class ActorPoolEvaluator:
         )
 
     @property
-    def n_actors(self) -> int:
-        """The number of actors a batch is split across."""
-        return len(self._actors)
+    def actors(self) -> list[ray.actor.ActorHandle]:
+        """The actors a batch is split across, in row order."""
+        return list(self._actors)
 
     def __call__(self, genomes: np.ndarray) -> Evaluation:
-        """Returns the evaluation of `genomes` (B, 56), rows in input order."""
+        """Returns the evaluation of `genomes` (B, 56), rows in input order.
+
+        Raises:
+            GenomeError: naming the bad row of the whole batch, before any actor is asked.
+        """
+        genomes = validate_genomes(genomes)
         n = len(genomes)
         n_parts = min(len(self._actors), max(n, 1))
         rows = [slice(n * i // n_parts, n * (i + 1) // n_parts) for i in range(n_parts)]
@@ -169,11 +200,7 @@ class ActorPoolEvaluator:
         shared = self._batches.free(n)
         shared.genomes[:n] = genomes
         layout = shared.layout.as_tuple()
-        refs = [
-            a.evaluate_shared.remote(layout, r.start, r.stop)
-            for a, r in zip(actors, rows, strict=True)
-        ]
-        done = ray.get(refs)
+        done = self._evaluate_shared(actors, [(layout, r.start, r.stop) for r in rows])
         result = shared.evaluation().take(slice(0, n))
         missing = [i for i, ok in enumerate(done) if not ok]
         remote = [actors[i].evaluate.remote(genomes[rows[i]]) for i in missing]
@@ -185,12 +212,51 @@ class ActorPoolEvaluator:
         self.parts_by_transport["shared-file"] += len(rows) - len(missing)
         return result
 
+    def _evaluate_shared(self, actors: list, requests: list[tuple]) -> list[bool]:
+        """Sends request i to actor i (its channel, else a Ray call); returns the answers."""
+        sent: dict[int, Connection] = {}
+        refs = {}
+        for i, (actor, request) in enumerate(zip(actors, requests, strict=True)):
+            conn = self._channel(i)
+            if conn is not None:
+                try:
+                    conn.send(request)
+                    sent[i] = conn
+                    continue
+                except OSError:  # the actor is gone; Ray restarts it
+                    self._channels.pop(i)
+            refs[i] = actor.evaluate_shared.remote(*request)
+        try:
+            done = channel.replies(sent)
+        except channel.ChannelLost as lost:
+            done = lost.answers
+            for i in lost.lost:  # Ray restarts the actor; its channel reopens next batch
+                self._channels.pop(i)
+                refs[i] = actors[i].evaluate_shared.remote(*requests[i])
+            for answer in done.values():
+                if isinstance(answer, Exception):
+                    raise answer from None
+        done.update(zip(refs, ray.get(list(refs.values())), strict=True))
+        return [bool(done[i]) for i in range(len(requests))]
+
+    def _channel(self, i: int) -> Connection | None:
+        """Returns actor i's side channel, opening it on first use (None: another node)."""
+        if i not in self._channels:
+            node = ray.get_runtime_context().get_node_id()
+            address = ray.get(self._actors[i].open_channel.remote(node, self._authkey))
+            self._channels[i] = None if address is None else channel.connect(address, self._authkey)
+        return self._channels[i]
+
     def _new_batch(self, n: int) -> SharedBatch:
         node = ray.get_runtime_context().get_node_id()
         return SharedBatch.create(node, n, self._n_angles, self._n_objectives)
 
     def close(self) -> None:
-        """Kills the actors (idempotent)."""
+        """Closes the channels, kills the actors, deletes the batch files (idempotent)."""
+        for conn in self._channels.values():
+            if conn is not None:
+                conn.close()
+        self._channels = {}
         for actor in self._actors:
             ray.kill(actor, no_restart=True)
         self._actors = []

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim import Evaluation, evaluate, random_genomes
+from sim import Evaluation, GenomeError, evaluate, random_genomes
 from workers.ray_evaluator import ActorPoolEvaluator, EvaluatorWorker
 from workers.result_pool import KEEP
 from workers.shared_batch import SHARED_DIR, SharedBatch, SharedLayout
@@ -106,3 +106,39 @@ def test_actor_leaves_a_batch_on_another_node_alone(ray_local):
         batch.release()
         ray.kill(worker)
     assert not Path(batch.layout.path).exists()
+
+
+def test_pool_goes_on_when_an_actor_is_killed_and_restarted(ray_local):
+    import ray
+
+    genomes = random_genomes(np.random.default_rng(21), 120)
+    want = evaluate(genomes, "Fp")
+    with start_pool("Fp", shared_memory=True) as pool:
+        assert_same(pool(genomes), want)  # channels open
+        ray.kill(pool.actors[0], no_restart=False)  # Ray restarts it (max_restarts=1)
+        assert_same(pool(genomes), want)  # lost channel: the part goes through Ray
+        assert_same(pool(genomes), want)  # a new channel to the restarted actor
+        assert pool.parts_by_transport == {"shared-file": 6, "object-store": 0}
+
+
+def test_a_bad_genome_is_named_by_its_row_in_the_whole_batch(ray_local):
+    with start_pool("Fp", shared_memory=True) as pool:
+        bad = random_genomes(np.random.default_rng(0), 10)
+        bad[7, 3] = 1.5
+        with pytest.raises(GenomeError, match=r"row 7, gene 3 is 1\.5"):
+            pool(bad)
+        fine = random_genomes(np.random.default_rng(2), 10)
+        assert_same(pool(fine), evaluate(fine, "Fp"))
+
+
+def test_an_error_raised_in_an_actor_reaches_the_caller(ray_local):
+    with start_pool("Fp", shared_memory=True) as pool:
+        genomes = random_genomes(np.random.default_rng(4), 10)
+        pool(genomes)  # channels open
+        # A request for a batch file that does not exist fails inside the actors.
+        node = ray_local.get_runtime_context().get_node_id()
+        missing = SharedLayout(f"{SHARED_DIR}/linkevo-batch-missing", node, 10, 40, 1)
+        request = (missing.as_tuple(), 0, 10)
+        with pytest.raises(FileNotFoundError, match="linkevo-batch-missing"):
+            pool._evaluate_shared(pool.actors, [request, request])
+        assert_same(pool(genomes), evaluate(genomes, "Fp"))

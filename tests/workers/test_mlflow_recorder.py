@@ -1,0 +1,60 @@
+"""Tests that MlflowRecorder gathers metrics, sends them in time and loses none."""
+
+from __future__ import annotations
+
+import numpy as np
+from mlflow.tracking import MlflowClient
+
+from workers.mlflow_recorder import MAX_BATCH, MlflowRecorder
+from workers.tracking import ensure_experiment
+
+NAMES = [f"metric_{k}" for k in range(12)]
+
+
+def new_run(tmp_path) -> tuple[MlflowClient, str]:
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    client = MlflowClient(uri)
+    run_id = client.create_run(ensure_experiment(uri, "recorder")).info.run_id
+    return client, run_id
+
+
+def steps(client: MlflowClient, run_id: str, name: str) -> list[int]:
+    return sorted(m.step for m in client.get_metric_history(run_id, name))
+
+
+def test_first_iteration_goes_out_at_once_then_metrics_wait_for_the_interval(tmp_path):
+    client, run_id = new_run(tmp_path)
+    recorder = MlflowRecorder(client, run_id, send_every_s=3600)
+    recorder.log_iteration(1, dict.fromkeys(NAMES, 1.0))
+    for operation in recorder._pending:
+        operation.wait()
+    assert steps(client, run_id, "metric_0") == [1]
+    for iteration in range(2, 6):
+        recorder.log_iteration(iteration, dict.fromkeys(NAMES, float(iteration)))
+    assert steps(client, run_id, "metric_0") == [1]  # gathered, not sent yet
+    recorder.flush()
+    assert steps(client, run_id, "metric_11") == [1, 2, 3, 4, 5]
+    assert client.get_run(run_id).data.metrics["metric_5"] == 5.0
+
+
+def test_more_metrics_than_one_batch_allows_are_all_written(tmp_path):
+    client, run_id = new_run(tmp_path)
+    recorder = MlflowRecorder(client, run_id, send_every_s=3600)
+    iterations = MAX_BATCH // len(NAMES) + 40  # about 1,500 metrics gathered at once
+    values = np.linspace(0.0, 1.0, iterations)
+    for iteration, value in enumerate(values, start=1):
+        recorder.log_iteration(iteration, dict.fromkeys(NAMES, float(value)))
+    recorder.flush()
+    history = client.get_metric_history(run_id, "metric_7")
+    assert sorted(m.step for m in history) == list(range(1, iterations + 1))
+    assert sorted(m.value for m in history) == sorted(values.tolist())
+
+
+def test_every_iteration_is_sent_when_the_interval_is_zero(tmp_path):
+    client, run_id = new_run(tmp_path)
+    recorder = MlflowRecorder(client, run_id, send_every_s=0)
+    for iteration in range(1, 4):
+        recorder.log_iteration(iteration, {"loss": float(iteration)})
+    assert len(recorder._pending) == 3
+    recorder.flush()
+    assert steps(client, run_id, "loss") == [1, 2, 3]
