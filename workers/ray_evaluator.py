@@ -83,7 +83,7 @@ class ActorPoolEvaluator:
     """Evaluates a batch by splitting it by index across K evaluator actors.
 
     The batch is cut into K contiguous parts (one per actor), evaluated concurrently and
-    concatenated back in order, so the result equals one in-process `sim.evaluate` call.
+    put back in order, so the result equals one in-process `sim.evaluate` call.
     With `shared_memory` (and a writable /dev/shm), the genomes and results pass through
     a `SharedBatch` file and the returned Evaluation's arrays are views into it; the file
     is reused only once none of them is alive any more, so a caller may keep results as
