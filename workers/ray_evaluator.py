@@ -8,6 +8,7 @@ requests on a side channel (`workers.channel`); others go through Ray's object s
 from __future__ import annotations
 
 import os
+import warnings
 from multiprocessing.connection import Connection
 
 import numpy as np
@@ -197,7 +198,17 @@ class ActorPoolEvaluator:
             refs = [a.evaluate.remote(genomes[r]) for a, r in zip(actors, rows, strict=True)]
             self.parts_by_transport["object-store"] += len(refs)
             return Evaluation.concat(ray.get(refs))
-        shared = self._batches.free(n)
+        try:
+            shared = self._batches.free(n)
+        except OSError as exc:
+            warnings.warn(
+                f"shared-memory batches unavailable ({exc}); using Ray's object store",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+            self._batches.close()
+            self._batches = None
+            return self(genomes)
         shared.genomes[:n] = genomes
         layout = shared.layout.as_tuple()
         done = self._evaluate_shared(actors, [(layout, r.start, r.stop) for r in rows])

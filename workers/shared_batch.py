@@ -92,13 +92,22 @@ class SharedBatch:
     @classmethod
     def create(cls, node_id: str, capacity: int, n_angles: int, n_objectives: int) -> SharedBatch:
         """Returns a new batch file in SHARED_DIR; the file is deleted by `release` or when
-        the object is freed."""
+        the object is freed.
+
+        Raises:
+            OSError: when the file cannot be made or its memory reserved (e.g. ENOSPC).
+        """
         path = SHARED_DIR / f"{PREFIX}{os.getpid()}-{uuid.uuid4().hex[:12]}"
         layout = SharedLayout(str(path), node_id, capacity, n_angles, n_objectives)
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
         try:
-            os.ftruncate(fd, layout.nbytes)
+            # Reserve the pages now: a full tmpfs (Docker gives /dev/shm 64 MB) then fails
+            # here with ENOSPC instead of killing the process with SIGBUS on first write.
+            os.posix_fallocate(fd, 0, layout.nbytes)
             mapping = mmap.mmap(fd, layout.nbytes)
+        except OSError:
+            path.unlink(missing_ok=True)
+            raise
         finally:
             os.close(fd)
         batch = cls(layout, mapping)

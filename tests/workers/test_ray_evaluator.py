@@ -142,3 +142,17 @@ def test_an_error_raised_in_an_actor_reaches_the_caller(ray_local):
         with pytest.raises(FileNotFoundError, match="linkevo-batch-missing"):
             pool._evaluate_shared(pool.actors, [request, request])
         assert_same(pool(genomes), evaluate(genomes, "Fp"))
+
+
+def test_pool_falls_back_to_the_object_store_when_no_batch_file_can_be_made(
+    ray_local, monkeypatch, tmp_path
+):
+    import workers.shared_batch
+
+    genomes = random_genomes(np.random.default_rng(8), 50)
+    with start_pool("Fp", shared_memory=True) as pool:
+        monkeypatch.setattr(workers.shared_batch, "SHARED_DIR", tmp_path / "missing")
+        with pytest.warns(RuntimeWarning, match="shared-memory batches unavailable"):
+            assert_same(pool(genomes), evaluate(genomes, "Fp"))
+        assert_same(pool(genomes), evaluate(genomes, "Fp"))
+        assert pool.parts_by_transport == {"shared-file": 0, "object-store": 4}
