@@ -97,6 +97,7 @@ class SharedBatch:
         Raises:
             OSError: when the file cannot be made or its memory reserved (e.g. ENOSPC).
         """
+        remove_orphans()
         path = SHARED_DIR / f"{PREFIX}{os.getpid()}-{uuid.uuid4().hex[:12]}"
         layout = SharedLayout(str(path), node_id, capacity, n_angles, n_objectives)
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o600)
@@ -146,6 +147,31 @@ class SharedBatch:
 
 def _unlink(path: str) -> None:
     Path(path).unlink(missing_ok=True)
+
+
+def remove_orphans() -> list[Path]:
+    """Deletes the batch files of processes that no longer run; returns them.
+
+    A trial process killed outright (a lost node, SIGKILL) cannot delete its files; the
+    next batch file made on the machine clears them. The owner is the pid in the name.
+    """
+    removed = []
+    for path in SHARED_DIR.glob(f"{PREFIX}*"):
+        pid = path.name[len(PREFIX) :].split("-", 1)[0]
+        if pid.isdigit() and not _running(int(pid)):
+            path.unlink(missing_ok=True)
+            removed.append(path)
+    return removed
+
+
+def _running(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's live process
+        return True
+    return True
 
 
 def shared_memory_available() -> bool:
