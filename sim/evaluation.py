@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -70,7 +71,7 @@ class Evaluation:
     def nbytes_for(n: int, n_angles: int, n_objectives: int) -> int:
         """Returns the bytes `Evaluation.empty(..., buffer=...)` lays out for n genomes."""
         return sum(
-            _aligned(int(np.prod(shape)) * np.dtype(dtype).itemsize)
+            _aligned(math.prod(shape) * np.dtype(dtype).itemsize)
             for _, shape, dtype in field_shapes(n, n_angles, n_objectives)
         )
 
@@ -90,7 +91,7 @@ class Evaluation:
                 arrays[name] = np.empty(shape, dtype)
                 continue
             arrays[name] = np.ndarray(shape, dtype, buffer, offset)
-            offset += _aligned(int(np.prod(shape)) * np.dtype(dtype).itemsize)
+            offset += _aligned(math.prod(shape) * np.dtype(dtype).itemsize)
         descriptors = {name: arrays.pop(name) for name in DESCRIPTOR_WIDTHS}
         return Evaluation(**arrays, descriptors=descriptors)
 

@@ -247,7 +247,8 @@ class ActorPoolEvaluator:
             for answer in done.values():
                 if isinstance(answer, Exception):
                     raise answer from None
-        done.update(zip(refs, ray.get(list(refs.values())), strict=True))
+        if refs:
+            done.update(zip(refs, ray.get(list(refs.values())), strict=True))
         return [bool(done[i]) for i in range(len(requests))]
 
     def _channel(self, i: int) -> Connection | None:

@@ -13,7 +13,7 @@ import mmap
 import os
 import uuid
 import weakref
-from dataclasses import astuple, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -59,7 +59,7 @@ class SharedLayout:
 
     def as_tuple(self) -> tuple:
         """Returns the fields as a plain tuple (cheaper to send than the dataclass)."""
-        return astuple(self)
+        return (self.path, self.node_id, self.capacity, self.n_angles, self.n_objectives)
 
 
 class SharedBatch:
