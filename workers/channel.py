@@ -5,7 +5,7 @@ request and the reply each wake several threads across processes), against 15–
 simulation per batch. An evaluator actor therefore also serves requests on a Unix socket in
 the abstract namespace (no file to clean up) from one thread of its own, and a co-located
 caller sends each batch's (layout, first row, last row) there: a one-genome batch costs
-about 0.6 ms more than in process this way, everything included. Ray still creates,
+about 0.4 ms more than in process this way, everything included. Ray still creates,
 places, restarts and kills the actor, and carries every call the channel cannot
 (docs/grid.md, "Evaluator transport").
 """
