@@ -60,8 +60,8 @@ def main() -> None:
                 numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
                 start = time.perf_counter()
                 evaluate(genomes, "Fp", args.mode, **kwargs)
-                seconds = time.perf_counter() - start
-                best[key] = min(best[key], seconds) if round_ else best[key]
+                if round_:
+                    best[key] = min(best[key], time.perf_counter() - start)
         for (name, threads), seconds in best.items():
             rate = n / seconds
             results[f"{name}_{n}_{threads}t"] = rate
