@@ -10,7 +10,7 @@ Prints three measurements:
    reference `sim.reference.evaluate_reference` measured in the same run as baselines;
 2. the Ray + MLflow overhead per iteration at batch 5,000: the same EA trial through
    `workers.trial.run_trial` with an in-process evaluator and no tracking, and with one
-   evaluator actor and an MLflow recorder on a fresh sqlite store (alternating, best of 5),
+   evaluator actor and an MLflow recorder on a fresh sqlite store (alternating, best of 11),
    split into the per-iteration loop and the once-per-trial part;
 3. the wall time of `linkevo grid configs/quick.toml` on a fresh store (unless skipped).
 """
@@ -38,7 +38,7 @@ from workers.tracking import ensure_experiment
 from workers.trial import TrialSpec, run_trial
 
 BATCH = 5000
-REPEATS = 15
+REPEATS = 40
 REFERENCE_GENOMES = 100
 REPO = Path(__file__).resolve().parent.parent
 
@@ -112,7 +112,7 @@ LOOP_PHASES = ("ask", "evaluate", "tell", "record", "checkpoint")
 """The per-iteration phases of `run_trial` (TrialResult.timings); the rest is per trial."""
 
 
-def tracking_overhead(work: Path, iterations: int, rounds: int = 5) -> None:
+def tracking_overhead(work: Path, iterations: int, rounds: int = 11) -> None:
     """Prints the per-iteration cost of one evaluator actor plus MLflow tracking.
 
     The untracked in-process trial and the tracked one-actor trial alternate `rounds` times;

@@ -674,6 +674,8 @@ def evaluate_batch(
         ys = np.empty((N_NODES, n_angles))
         ux = np.empty((MAX_BEAMS, n_angles))
         uy = np.empty((MAX_BEAMS, n_angles))
+        x0 = np.empty(N_NODES)
+        y0 = np.empty(N_NODES)
         ux0 = np.empty(MAX_BEAMS)
         uy0 = np.empty(MAX_BEAMS)
         depth = np.empty(N_NODES, np.int64)
@@ -686,7 +688,7 @@ def evaluate_batch(
         best = np.empty(targets.shape[0])
         spare = np.empty(targets.shape[0])
         for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            n_beams = decode_one(genomes[i], legacy, ni, nf, bi, bf, px, py, ux0, uy0)
+            n_beams = decode_one(genomes[i], legacy, ni, nf, bi, bf, x0, y0, ux0, uy0)
             err = simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, ok)
             f = find_foot(ys, ok, shift)
             ae = angle_error(f, ni, bi, n_beams, xs, ys, ok, theta, legacy, codes)

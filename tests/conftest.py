@@ -2,25 +2,28 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 import pytest
+
+from workers.evaluators import Evaluator
 
 
 class CrashingEvaluator:
     """Evaluates normally, then raises on call number `fail_at` (a crash mid-trial)."""
 
-    def __init__(self, inner: Callable, fail_at: int) -> None:
+    def __init__(self, inner: Evaluator, fail_at: int) -> None:
         self.inner = inner
         self.calls = 0
         self.fail_at = fail_at
 
-    def __call__(self, genomes: np.ndarray):
+    def submit(self, genomes: np.ndarray):
         self.calls += 1
         if self.calls == self.fail_at:
             raise RuntimeError("evaluator crashed")
-        return self.inner(genomes)
+        return self.inner.submit(genomes)
+
+    def __call__(self, genomes: np.ndarray):
+        return self.submit(genomes)()
 
 
 @pytest.fixture

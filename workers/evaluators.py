@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 from typing import Protocol
 
@@ -13,12 +14,20 @@ from sim.evaluation import Evaluation
 from sim.fitness import N_OBJECTIVES, NAMED_TARGETS, Target, named_target
 from workers.result_pool import MemoryBuffer, ResultPool
 
+Pending = Callable[[], Evaluation]
+"""A submitted batch: calling it waits for and returns its Evaluation."""
+
 
 class Evaluator(Protocol):
     """Evaluates a batch of genomes for a trial."""
 
+    def submit(self, genomes: np.ndarray) -> Pending:
+        """Starts evaluating genomes (B, 56); the returned Pending gives the Evaluation,
+        rows in input order. Bad genomes raise here, before any work starts."""
+        ...
+
     def __call__(self, genomes: np.ndarray) -> Evaluation:
-        """Returns the evaluation of genomes (B, 56), rows in input order."""
+        """Returns the evaluation of genomes (B, 56): `submit(genomes)()`."""
         ...
 
 
@@ -77,3 +86,8 @@ class LocalEvaluator:
             n_angles=self.n_angles,
             out=out,
         )
+
+    def submit(self, genomes: np.ndarray) -> Pending:
+        """Evaluates genomes (B, 56) now, in this thread; the Pending returns the result."""
+        evaluation = self(genomes)
+        return lambda: evaluation

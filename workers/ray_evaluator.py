@@ -7,8 +7,10 @@ requests on a side channel (`workers.channel`); others go through Ray's object s
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
+from collections.abc import Callable
 from multiprocessing.connection import Connection
 
 import numpy as np
@@ -20,7 +22,7 @@ from sim.evaluation import Evaluation
 from sim.fitness import N_OBJECTIVES
 from sim.genome import validate_genomes
 from workers import channel
-from workers.evaluators import LocalEvaluator
+from workers.evaluators import LocalEvaluator, Pending
 from workers.result_pool import KEEP, ResultPool
 from workers.shared_batch import SharedBatch, SharedLayout, shared_memory_available
 
@@ -125,6 +127,7 @@ class ActorPoolEvaluator:
         self._channels: dict[int, Connection | None] = {}
         self._authkey = os.urandom(32)
         self.parts_by_transport = {"shared-file": 0, "object-store": 0}
+        self._in_flight: Pending | None = None
 
     @classmethod
     def start(
@@ -184,12 +187,23 @@ class ActorPoolEvaluator:
         return list(self._actors)
 
     def __call__(self, genomes: np.ndarray) -> Evaluation:
-        """Returns the evaluation of `genomes` (B, 56), rows in input order.
+        """Returns the evaluation of `genomes` (B, 56), rows in input order: `submit()()`."""
+        return self.submit(genomes)()
+
+    def submit(self, genomes: np.ndarray) -> Pending:
+        """Sends the parts of `genomes` (B, 56) to the actors and returns at once.
+
+        The returned Pending (call it once) waits for the parts and returns the Evaluation,
+        rows in input order. One batch is in flight at a time: submitting before the last
+        batch was collected first waits for that one and drops it.
 
         Raises:
             GenomeError: naming the bad row of the whole batch, before any actor is asked.
         """
         genomes = validate_genomes(genomes)
+        if self._in_flight is not None:
+            with contextlib.suppress(Exception):  # abandoned by the caller
+                self._in_flight()
         n = len(genomes)
         n_parts = min(len(self._actors), max(n, 1))
         rows = [slice(n * i // n_parts, n * (i + 1) // n_parts) for i in range(n_parts)]
@@ -197,7 +211,7 @@ class ActorPoolEvaluator:
         if self._batches is None or n == 0:
             refs = [a.evaluate.remote(genomes[r]) for a, r in zip(actors, rows, strict=True)]
             self.parts_by_transport["object-store"] += len(refs)
-            return Evaluation.concat(ray.get(refs))
+            return self._track(lambda: Evaluation.concat(ray.get(refs)))
         try:
             shared = self._batches.free(n)
         except OSError as exc:
@@ -208,23 +222,40 @@ class ActorPoolEvaluator:
             )
             self._batches.close()
             self._batches = None
-            return self(genomes)
+            return self.submit(genomes)
         shared.genomes[:n] = genomes
         layout = shared.layout.as_tuple()
-        done = self._evaluate_shared(actors, [(layout, r.start, r.stop) for r in rows])
-        result = shared.evaluation().take(slice(0, n))
-        missing = [i for i, ok in enumerate(done) if not ok]
-        remote = [actors[i].evaluate.remote(genomes[rows[i]]) for i in missing]
-        for i, part in zip(missing, ray.get(remote), strict=True):
-            rows_out = result.take(rows[i]).arrays()
-            for name, values in part.arrays().items():
-                rows_out[name][...] = values
-        self.parts_by_transport["object-store"] += len(missing)
-        self.parts_by_transport["shared-file"] += len(rows) - len(missing)
-        return result
+        answers = self._send_shared(actors, [(layout, r.start, r.stop) for r in rows])
 
-    def _evaluate_shared(self, actors: list, requests: list[tuple]) -> list[bool]:
-        """Sends request i to actor i (its channel, else a Ray call); returns the answers."""
+        def collect() -> Evaluation:
+            result = shared.evaluation().take(slice(0, n))
+            missing = [i for i, ok in enumerate(answers()) if not ok]
+            remote = [actors[i].evaluate.remote(genomes[rows[i]]) for i in missing]
+            for i, part in zip(missing, ray.get(remote), strict=True):
+                rows_out = result.take(rows[i]).arrays()
+                for name, values in part.arrays().items():
+                    rows_out[name][...] = values
+            self.parts_by_transport["object-store"] += len(missing)
+            self.parts_by_transport["shared-file"] += len(rows) - len(missing)
+            return result
+
+        return self._track(collect)
+
+    def _track(self, collect: Pending) -> Pending:
+        """Returns `collect` as the batch in flight, to be called once."""
+
+        def pending() -> Evaluation:
+            if self._in_flight is not pending:
+                raise RuntimeError("this batch was collected already, or dropped by a later submit")
+            self._in_flight = None
+            return collect()
+
+        self._in_flight = pending
+        return pending
+
+    def _send_shared(self, actors: list, requests: list[tuple]) -> Callable[[], list[bool]]:
+        """Sends request i to actor i (its channel, else a Ray call); returns a function
+        that waits for the answers (True: done, False: the actor is on another node)."""
         sent: dict[int, Connection] = {}
         refs = {}
         for i, (actor, request) in enumerate(zip(actors, requests, strict=True)):
@@ -237,19 +268,23 @@ class ActorPoolEvaluator:
                 except OSError:  # the actor is gone; Ray restarts it
                     self._channels.pop(i)
             refs[i] = actor.evaluate_shared.remote(*request)
-        try:
-            done = channel.replies(sent)
-        except channel.ChannelLost as lost:
-            done = lost.answers
-            for i in lost.lost:  # Ray restarts the actor; its channel reopens next batch
-                self._channels.pop(i)
-                refs[i] = actors[i].evaluate_shared.remote(*requests[i])
-            for answer in done.values():
-                if isinstance(answer, Exception):
-                    raise answer from None
-        if refs:  # even an empty ray.get costs about 0.25 ms
-            done.update(zip(refs, ray.get(list(refs.values())), strict=True))
-        return [bool(done[i]) for i in range(len(requests))]
+
+        def answers() -> list[bool]:
+            try:
+                done = channel.replies(sent)
+            except channel.ChannelLost as lost:
+                done = lost.answers
+                for i in lost.lost:  # Ray restarts the actor; its channel reopens next batch
+                    self._channels.pop(i)
+                    refs[i] = actors[i].evaluate_shared.remote(*requests[i])
+                for answer in done.values():
+                    if isinstance(answer, Exception):
+                        raise answer from None
+            if refs:  # even an empty ray.get costs about 0.25 ms
+                done.update(zip(refs, ray.get(list(refs.values())), strict=True))
+            return [bool(done[i]) for i in range(len(requests))]
+
+        return answers
 
     def _channel(self, i: int) -> Connection | None:
         """Returns actor i's side channel, opening it on first use (None: another node)."""

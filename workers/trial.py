@@ -210,7 +210,13 @@ def _resume(
 
 
 def _checkpoint(spec: TrialSpec, optimizer: Optimizer, rows: int, folder: Path) -> None:
-    save_checkpoint(folder, Checkpoint(optimizer.state_dict(), rows, _spec_doc(spec)))
+    _save_checkpoint(spec, optimizer.state_dict(), optimizer, rows, folder)
+
+
+def _save_checkpoint(
+    spec: TrialSpec, state: dict[str, np.ndarray], optimizer: Optimizer, rows: int, folder: Path
+) -> None:
+    save_checkpoint(folder, Checkpoint(state, rows, _spec_doc(spec)))
     _write_torch_state(optimizer, folder / ENCODER_PT)
 
 
@@ -297,23 +303,41 @@ def run_trial(
         timings[phase] += now - clock
         clock = now
 
-    while optimizer.evaluations + spec.batch_size <= spec.evaluations:
-        genomes = optimizer.ask()
-        lap("ask")
-        evaluation = evaluator(genomes)
-        lap("evaluate")
-        optimizer.tell(genomes, evaluation)
-        lap("tell")
+    def bookkeeping(iteration: int, state: dict[str, np.ndarray] | None) -> None:
+        """Records iteration's metrics and saves the checkpoint state taken after its tell."""
         metrics = optimizer.metrics()
         log.append(metrics)
-        recorder.log_iteration(optimizer.iteration, metrics)
+        recorder.log_iteration(iteration, metrics)
         lap("record")
-        if optimizer.iteration % spec.checkpoint_every == 0:
-            _checkpoint(spec, optimizer, optimizer.iteration, folder)
+        if state is not None:
+            _save_checkpoint(spec, state, optimizer, iteration, folder)
             lap("checkpoint")
-        if spec.max_seconds is not None and time.monotonic() - start >= spec.max_seconds:
-            stopped_by = "max_seconds"
-            break
+
+    # An iteration's bookkeeping runs while the next batch is being evaluated: a remote
+    # evaluator computes meanwhile (docs/grid.md, "Bookkeeping overlap"). ask() leaves
+    # what metrics() reads unchanged; the checkpoint state is taken right after tell().
+    deferred: tuple[int, dict[str, np.ndarray] | None] | None = None
+    try:
+        while optimizer.evaluations + spec.batch_size <= spec.evaluations:
+            genomes = optimizer.ask()
+            lap("ask")
+            pending = evaluator.submit(genomes)
+            lap("evaluate")
+            if deferred is not None:
+                done, deferred = deferred, None
+                bookkeeping(*done)
+            evaluation = pending()
+            lap("evaluate")
+            optimizer.tell(genomes, evaluation)
+            lap("tell")
+            due = optimizer.iteration % spec.checkpoint_every == 0
+            deferred = (optimizer.iteration, optimizer.state_dict() if due else None)
+            if spec.max_seconds is not None and time.monotonic() - start >= spec.max_seconds:
+                stopped_by = "max_seconds"
+                break
+    finally:  # a failed evaluation still leaves the last told iteration recorded
+        if deferred is not None:
+            bookkeeping(*deferred)
     _checkpoint(spec, optimizer, optimizer.iteration, folder)
     best_loss = _write_final(spec, optimizer, out_dir)
     metrics = optimizer.metrics()

@@ -7,6 +7,9 @@ genes near 0 and genes at exact bin edges, where ties and tangencies are common)
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -81,7 +84,7 @@ def test_evaluate_equals_reference_for_d24_and_user_targets(random_set, mode):
             assert_same("loss", kernel.loss, ref.loss, genomes)
 
 
-@pytest.mark.parametrize("n_angles", [7, 64])
+@pytest.mark.parametrize("n_angles", [2, 7, 64])
 def test_evaluate_equals_reference_at_other_angle_counts(mutated_set, n_angles):
     genomes = mutated_set[:200]
     for mode in sim.MODES:
@@ -89,6 +92,20 @@ def test_evaluate_equals_reference_at_other_angle_counts(mutated_set, n_angles):
         ref = reference.evaluate_reference(genomes, "Fsl", mode, n_angles=n_angles)
         assert kernel.valid.shape == (200, n_angles)
         assert_evaluations_equal(kernel, ref, genomes)
+
+
+def test_fewer_angles_than_nodes_stay_inside_the_kernels_buffers():
+    """Per-angle scratch once also held the 12 node positions at angle 0: with A < 12 the
+    kernel wrote past it and corrupted the heap. Run where a crash cannot take pytest down."""
+    code = (
+        "import numpy as np, sim\n"
+        "g = sim.random_genomes(np.random.default_rng(1), 5000)\n"
+        "for _ in range(20):\n"
+        "    ev = sim.evaluate(g, n_angles=4)\n"
+        "assert np.isfinite(ev.loss).all()\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
 
 
 @pytest.mark.parametrize("mode", sim.MODES)

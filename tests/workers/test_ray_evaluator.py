@@ -131,6 +131,24 @@ def test_a_bad_genome_is_named_by_its_row_in_the_whole_batch(ray_local):
         assert_same(pool(fine), evaluate(fine, "Fp"))
 
 
+@pytest.mark.parametrize("shared_memory", [True, False], ids=["shared-file", "object-store"])
+def test_a_submitted_batch_is_collected_once_and_a_dropped_one_is_drained(ray_local, shared_memory):
+    rng = np.random.default_rng(12)
+    first, second, third = (random_genomes(rng, 40) for _ in range(3))
+    with start_pool("Fp", shared_memory) as pool:
+        pending = pool.submit(first)
+        assert_same(pending(), evaluate(first, "Fp"))
+        with pytest.raises(RuntimeError, match="collected already"):
+            pending()
+        dropped = pool.submit(second)
+        pending = pool.submit(third)  # waits for `second` first: no reply is left queued
+        with pytest.raises(RuntimeError, match="dropped by a later submit"):
+            dropped()
+        assert_same(pending(), evaluate(third, "Fp"))
+        assert_same(pool(second), evaluate(second, "Fp"))
+        assert sum(pool.parts_by_transport.values()) == 8  # 4 batches, 2 parts each
+
+
 def test_an_error_raised_in_an_actor_reaches_the_caller(ray_local):
     with start_pool("Fp", shared_memory=True) as pool:
         genomes = random_genomes(np.random.default_rng(4), 10)
@@ -140,7 +158,7 @@ def test_an_error_raised_in_an_actor_reaches_the_caller(ray_local):
         missing = SharedLayout(f"{SHARED_DIR}/linkevo-batch-missing", node, 10, 40, 1)
         request = (missing.as_tuple(), 0, 10)
         with pytest.raises(FileNotFoundError, match="linkevo-batch-missing"):
-            pool._evaluate_shared(pool.actors, [request, request])
+            pool._send_shared(pool.actors, [request, request])()
         assert_same(pool(genomes), evaluate(genomes, "Fp"))
 
 

@@ -17,7 +17,7 @@ from sim.linkage_doc import from_document
 from workers.artifacts import read_npz
 from workers.evaluators import LocalEvaluator
 from workers.recorders import NullRecorder
-from workers.trial import TrialSpec, TrialSpecError, run_trial
+from workers.trial import TrialSpec, TrialSpecError, build_optimizer, run_trial
 
 BATCH = 100
 
@@ -51,6 +51,29 @@ def spec_for(approach: str, **changes) -> TrialSpec:
 
 def evaluator_for(spec: TrialSpec) -> LocalEvaluator:
     return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
+
+
+class WatchingEvaluator:
+    """Notes how many iterations the recorder holds at each submit and each collect."""
+
+    def __init__(self, inner: LocalEvaluator, recorder: ListRecorder) -> None:
+        self.inner = inner
+        self.recorder = recorder
+        self.at_submit: list[int] = []
+        self.at_collect: list[int] = []
+
+    def submit(self, genomes: np.ndarray):
+        self.at_submit.append(len(self.recorder.iterations))
+        pending = self.inner.submit(genomes)
+
+        def collect():
+            self.at_collect.append(len(self.recorder.iterations))
+            return pending()
+
+        return collect
+
+    def __call__(self, genomes: np.ndarray):
+        return self.submit(genomes)()
 
 
 def read_rows(path: Path) -> list[list[str]]:
@@ -106,6 +129,24 @@ def test_trial_writes_every_artefact(approach: str, tmp_path: Path) -> None:
     assert "numpy" in settings["versions"]
     state = read_npz(tmp_path / "checkpoint" / "state.npz")  # loads without pickle
     assert int(state["checkpoint.rows"]) == 6
+
+
+@pytest.mark.parametrize("approach", ["EA", "MAP-LIS"])
+def test_an_iterations_bookkeeping_overlaps_the_next_evaluation(approach: str, tmp_path: Path):
+    spec = spec_for(approach)
+    recorder = ListRecorder()
+    watching = WatchingEvaluator(evaluator_for(spec), recorder)
+    run_trial(spec, watching, recorder, tmp_path)
+    # Iteration k is recorded after batch k + 1 was submitted and before it is collected.
+    assert watching.at_submit == [0, 0, 1, 2, 3, 4]
+    assert watching.at_collect == [0, 1, 2, 3, 4, 5]
+    # ... with the metrics it had right after its tell().
+    optimizer, evaluator, expected = build_optimizer(spec), evaluator_for(spec), []
+    for _ in range(spec.iterations):
+        genomes = optimizer.ask()
+        optimizer.tell(genomes, evaluator(genomes))
+        expected.append((optimizer.iteration, optimizer.metrics()))
+    np.testing.assert_equal(recorder.iterations, expected)
 
 
 def test_same_seed_same_metrics_other_seed_differs(tmp_path: Path) -> None:
