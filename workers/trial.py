@@ -209,13 +209,10 @@ def _resume(
     return True
 
 
-def _checkpoint(spec: TrialSpec, optimizer: Optimizer, rows: int, folder: Path) -> None:
-    _save_checkpoint(spec, optimizer.state_dict(), optimizer, rows, folder)
-
-
-def _save_checkpoint(
+def _checkpoint(
     spec: TrialSpec, state: dict[str, np.ndarray], optimizer: Optimizer, rows: int, folder: Path
 ) -> None:
+    """Saves `state` (taken after a tell) with the metrics rows so far, and the encoder."""
     save_checkpoint(folder, Checkpoint(state, rows, _spec_doc(spec)))
     _write_torch_state(optimizer, folder / ENCODER_PT)
 
@@ -310,7 +307,7 @@ def run_trial(
         recorder.log_iteration(iteration, metrics)
         lap("record")
         if state is not None:
-            _save_checkpoint(spec, state, optimizer, iteration, folder)
+            _checkpoint(spec, state, optimizer, iteration, folder)
             lap("checkpoint")
 
     # An iteration's bookkeeping runs while the next batch is being evaluated: a remote
@@ -338,7 +335,7 @@ def run_trial(
     finally:  # a failed evaluation still leaves the last told iteration recorded
         if deferred is not None:
             bookkeeping(*deferred)
-    _checkpoint(spec, optimizer, optimizer.iteration, folder)
+    _checkpoint(spec, optimizer.state_dict(), optimizer, optimizer.iteration, folder)
     best_loss = _write_final(spec, optimizer, out_dir)
     metrics = optimizer.metrics()
     result = TrialResult(
