@@ -34,7 +34,12 @@ CRANK_TIP = 4
 # Fitness codes.
 FP, FSL, FP2, FSL2 = 0, 1, 2, 3
 
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+_BATCH = {"cache": True, "nogil": True, "error_model": "numpy"}
+"""For the batch entry points, which allocate their scratch arrays."""
+_JIT = {**_BATCH, "_nrt": False}
+"""For the per-linkage helpers: they never allocate, so they are compiled without numba's
+reference counting, which otherwise costs two calls per array argument per call (about 6 %
+of the whole evaluation)."""
 _INLINE = {**_JIT, "inline": "always"}
 """For the small per-sample helpers called inside loops that must vectorise."""
 
@@ -210,7 +215,7 @@ def decode_one(g, legacy, ni, nf, bi, bf, px, py, ux, uy):
     return n_beams
 
 
-@numba.njit(**_JIT)
+@numba.njit(**_BATCH)
 def crank_angles(n_angles, legacy):
     """Returns the A crank angles (legacy accumulates 2*pi/A; paper uses k*2*pi/A)."""
     theta = np.empty(n_angles)
@@ -227,18 +232,30 @@ def crank_angles(n_angles, legacy):
 def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
     """Places the motor, static nodes and crank tip in every column (crank angle).
 
-    xs/ys (12, A) receive positions; ux/uy (15, A) the crank's direction in row 0.
+    xs/ys (12, A) receive positions; ux/uy (15, A) the crank's direction in row 0. Each
+    loop writes one row: a loop writing several rows of arrays that might overlap does not
+    vectorise.
     """
-    crank = nf[CRANK_TIP, 0]
-    for k in range(xs.shape[1]):
+    n = xs.shape[1]
+    for k in range(n):
         xs[0, k] = 0.0
+    for k in range(n):
         ys[0, k] = 0.0
-        for s in range(1, 4):
-            xs[s, k] = nf[s, 0]
-            ys[s, k] = nf[s, 1]
+    for s in range(1, 4):
+        x = nf[s, 0]
+        y = nf[s, 1]
+        for k in range(n):
+            xs[s, k] = x
+        for k in range(n):
+            ys[s, k] = y
+    crank = nf[CRANK_TIP, 0]
+    for k in range(n):
         xs[CRANK_TIP, k] = crank * cos_t[k]
+    for k in range(n):
         ys[CRANK_TIP, k] = crank * sin_t[k]
+    for k in range(n):
         ux[0, k] = cos_t[k]
+    for k in range(n):
         uy[0, k] = sin_t[k]
 
 
@@ -281,8 +298,11 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
     it has no solution (positions there are left meaningless).
 
     Anchors can coincide with the backup point taken only when r0 == r1, and the tangent
-    case is legacy's alone: every other triangle runs the generic loop, which holds fewer
-    live values and runs about a third faster (docs/benchmarks.md).
+    case is legacy's alone: every other triangle runs the generic circle_point, split in
+    two passes over the angles. The first stores 1/d' and a in the node's own rows, the
+    second reads them back and places the node: each pass has a shorter dependency chain
+    than one pass would, so more angles are in flight at once (docs/benchmarks.md). The
+    operations are circle_point's, in its order, so the results are the same bit for bit.
     """
     a = ni[new, 1]
     c = ni[new, 2]
@@ -300,11 +320,30 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
             ys[new, k] = y
             ok[k] = ok[k] & good
         return
-    for k in range(xs.shape[1]):
-        x, y, good, _, _, _ = circle_point(xs[a, k], ys[a, k], xs[c, k], ys[c, k], r0, r1, side)
-        xs[new, k] = x
-        ys[new, k] = y
-        ok[k] = ok[k] & good
+    r_sum = r0 + r1
+    r_diff = abs(r0 - r1)
+    r0_sq = r0 * r0
+    k2 = r0_sq - r1 * r1
+    n = xs.shape[1]
+    for k in range(n):
+        dx = xs[c, k] - xs[a, k]
+        dy = ys[c, k] - ys[a, k]
+        d = math.sqrt(dx * dx + dy * dy)
+        ok[k] = ok[k] & (d - TOL <= r_sum) & (d + TOL >= r_diff)
+        dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
+        inv = 1.0 / dn
+        xs[new, k] = inv
+        ys[new, k] = 0.5 * (k2 + dn * dn) * inv
+    for k in range(n):
+        p0x = xs[a, k]
+        p0y = ys[a, k]
+        inv = xs[new, k]
+        along = ys[new, k]
+        ex = (xs[c, k] - p0x) * inv
+        ey = (ys[c, k] - p0y) * inv
+        h = side * math.sqrt(max(r0_sq - along * along, 0.0))
+        xs[new, k] = p0x + along * ex + h * ey
+        ys[new, k] = p0y + along * ey - h * ex
 
 
 @numba.njit(**_JIT)
@@ -474,7 +513,15 @@ def find_foot(ys, valid, shift):
         shift[k] = 0.0 if valid[k] else np.inf
     foot = 0
     best = np.inf
-    for j in range(ys.shape[0]):
+    any_valid = False
+    for k in range(n):
+        any_valid |= valid[k]
+    if any_valid:  # the motor's and static nodes' y never change: column 0 will do
+        for j in range(CRANK_TIP):
+            if ys[j, 0] < best:
+                best = ys[j, 0]
+                foot = j
+    for j in range(CRANK_TIP, ys.shape[0]):
         low0 = low1 = low2 = low3 = np.inf
         k = 0
         while k + 4 <= n:
@@ -646,7 +693,7 @@ def structure(ni, bi, bf, n_beams, foot, depth, ancestors, st, i):
     st[i, 3] = n_moving * 10.0 / size
 
 
-@numba.njit(parallel=True, **_JIT)
+@numba.njit(parallel=True, **_BATCH)
 def evaluate_batch(
     genomes, legacy, n_angles, fitness, targets, is_step, n_chunks,
     loss, error, angle_err, valid, foot, foot_x, foot_y, wh, lis, st,
@@ -718,7 +765,7 @@ def evaluate_batch(
             lis[i, 1] = f_l
 
 
-@numba.njit(parallel=True, **_JIT)
+@numba.njit(parallel=True, **_BATCH)
 def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
     """Decodes every genome at angle 0 into the packed topology arrays (see decode.py)."""
     for i in numba.prange(genomes.shape[0]):
@@ -731,7 +778,7 @@ def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
         pos0[i, :, 1] = py
 
 
-@numba.njit(parallel=True, **_JIT)
+@numba.njit(parallel=True, **_BATCH)
 def simulate_batch(ni, nf, bi, n_beams, n_angles, legacy, positions, valid, bang, foot):
     """Simulates decoded linkages: positions (N, 12, A, 2), valid (N, A), bang (N, 15, A).
 
