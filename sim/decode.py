@@ -27,7 +27,7 @@ class LinkageBatch:
             static [x, y, 0...];
             crank tip [crank length, 0...].
         beam_int: (N, 15, 6) int64 per beam [start, end, kind, parent, root, inversions],
-            -1 where absent (see `sim.kernels.decode_one`).
+            -1 where absent (see `sim.kernels.decode_and_simulate`).
         beam_length: (N, 15) float64, 0 where absent.
         n_beams: (N,) int64.
         positions0: (N, 12, 2) float64 node positions at crank angle 0.

@@ -73,7 +73,7 @@ def triangle_point(p0x, p0y, p1x, p1y, r0, r1, side, back_x, back_y, legacy):
     """Returns (x, y, good): spec §2 circle_intersection of anchors P0, P1, written as selects.
 
     Adds to circle_point the legacy tangent case and coincident anchors with r0 == r1,
-    which take the backup point; back_x/back_y is its offset (see decode_one).
+    which take the backup point; back_x/back_y is its offset (see decode_and_simulate).
     """
     x, y, good, d, ex, ey = circle_point(p0x, p0y, p1x, p1y, r0, r1, side)
     if legacy:
@@ -108,12 +108,13 @@ def set_beam(bi, bf, b, start, end, kind, parent, length):
 
 
 @numba.njit(**_JIT)
-def repair_anchor(a, c, n_nodes, px, py):
-    """Returns anchor C after the published repair loop (spec §2, docs/simulator.md)."""
+def repair_anchor(a, c, n_nodes, xs, ys):
+    """Returns anchor C after the published repair loop (spec §2, docs/simulator.md);
+    column 0 of xs/ys (12, A) holds the nodes' positions at angle 0."""
     first = c
     check_min = True
     while True:
-        d = math.sqrt((px[a] - px[c]) ** 2 + (py[a] - py[c]) ** 2)
+        d = math.sqrt((xs[a, 0] - xs[c, 0]) ** 2 + (ys[a, 0] - ys[c, 0]) ** 2)
         if not (a == c or d > MAX_ANCHOR_DIST or (check_min and d < MIN_ANCHOR_DIST)):
             return c
         c -= 1
@@ -123,96 +124,6 @@ def repair_anchor(a, c, n_nodes, px, py):
             if not check_min:
                 return first
             check_min = False
-
-
-@numba.njit(**_JIT)
-def decode_one(g, legacy, ni, nf, bi, bf, px, py, ux, uy):
-    """Decodes one genome (56,) at crank angle 0; returns the number of beams.
-
-    Fills ni (12, 4) int [kind, a, c, dir], nf (12, 5) float [p0 .. p4], bi (15, 6) int
-    [start, end, kind, parent, root, inversions], bf (15,) beam lengths, and the node
-    positions at angle 0 in px/py (12,); ux/uy (15,) receive beam directions at angle 0.
-    Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle, p3/p4=l1 times its cosine and
-    sine (the backup point's offset; only when l1 == l2, else 0). Extension: a=parent beam,
-    c=inverted, p0=length. Static: p0=x, p1=y. Crank tip: p0=crank length. An extension's
-    root is the crank or triangle beam its chain of parents starts from, and inversions
-    counts the inverted links on that chain (its angle is the root's plus that many pi).
-    """
-    ni[:] = -1
-    nf[:] = 0.0
-    bi[:] = -1
-    bf[:] = 0.0
-    ni[0, 0] = MOTOR
-    px[0] = 0.0
-    py[0] = 0.0
-    for s in range(3):
-        ni[1 + s, 0] = STATIC
-        nf[1 + s, 0] = float(int(g[2 * s] * 11) - 5)
-        nf[1 + s, 1] = float(int(g[2 * s + 1] * 11) - 5)
-        px[1 + s] = nf[1 + s, 0]
-        py[1 + s] = nf[1 + s, 1]
-    crank = 2.0 + 6.0 * g[CRANK_GENE]
-    ni[CRANK_TIP, 0] = CRANK
-    nf[CRANK_TIP, 0] = crank
-    set_beam(bi, bf, 0, 0, CRANK_TIP, B_CRANK, -1, crank)
-    px[CRANK_TIP] = crank * 1.0  # L * (cos 0, sin 0), as in every later crank angle
-    py[CRANK_TIP] = crank * 0.0
-    ux[0] = 1.0
-    uy[0] = 0.0
-    n_beams = 1
-    for new in range(CRANK_TIP + 1, N_NODES):
-        o = FIRST_BLOCK + BLOCK_SIZE * (new - CRANK_TIP - 1)
-        if int(g[o] * 4) == 0:
-            parent = int(g[o + 1] * n_beams)
-            inverted = int(g[o + 3] * 2)
-            length = 12.0 * g[CRANK_GENE] + 3.0 if legacy else 2.0 + 13.0 * g[o + 6]
-            ni[new, 0] = EXTENSION
-            ni[new, 1] = parent
-            ni[new, 2] = inverted
-            nf[new, 0] = length
-            start = bi[parent, 0] if inverted else bi[parent, 1]
-            set_beam(bi, bf, n_beams, start, new, B_EXTENSION, parent, length)
-            chained = bi[parent, 2] == B_EXTENSION
-            bi[n_beams, 4] = bi[parent, 4] if chained else parent
-            bi[n_beams, 5] = inverted + (bi[parent, 5] if chained else 0)
-            if bi[parent, 2] == B_TRIANGLE:
-                s = bi[parent, 0]
-                e = bi[parent, 1]
-                ux[parent], uy[parent] = unit_direction(px[e] - px[s], py[e] - py[s])
-            sign = -1.0 if inverted else 1.0
-            ux[n_beams] = sign * ux[parent]
-            uy[n_beams] = sign * uy[parent]
-            px[new] = px[start] + length * ux[n_beams]
-            py[new] = py[start] + length * uy[n_beams]
-            n_beams += 1
-            continue
-        a = int(g[o + 1] * (new - 1)) + 1
-        c = int(g[o + 2] * (new - 1)) + 1
-        c = repair_anchor(a, c, new, px, py)
-        d = math.sqrt((px[a] - px[c]) ** 2 + (py[a] - py[c]) ** 2)
-        s1 = max(d - L_MAX, L_MIN)
-        l1 = (L_MAX - s1) * g[o + 5] + s1
-        lo = abs(d - l1)
-        hi = min(d + l1, L_MAX)
-        l2 = (hi - lo) * g[o + 6] + lo
-        ni[new, 0] = TRIANGLE
-        ni[new, 1] = a
-        ni[new, 2] = c
-        ni[new, 3] = int(g[o + 3] * 2)
-        nf[new, 0] = l1
-        nf[new, 1] = l2
-        nf[new, 2] = 2.0 * math.pi * g[o + 4]
-        if l1 == l2:  # the backup point serves only coincident anchors with r0 == r1
-            nf[new, 3] = l1 * math.cos(nf[new, 2])
-            nf[new, 4] = l1 * math.sin(nf[new, 2])
-        set_beam(bi, bf, n_beams, a, new, B_TRIANGLE, -1, l1)
-        set_beam(bi, bf, n_beams + 1, c, new, B_TRIANGLE, -1, l2)
-        side = 1.0 if ni[new, 3] == 0 else -1.0
-        px[new], py[new], _ = triangle_point(
-            px[a], py[a], px[c], py[c], l1, l2, side, nf[new, 3], nf[new, 4], legacy
-        )
-        n_beams += 2
-    return n_beams
 
 
 @numba.njit(**_BATCH)
@@ -347,6 +258,94 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
 
 
 @numba.njit(**_JIT)
+def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok):
+    """Decodes one genome (56,) and simulates it over A crank angles; returns the number
+    of beams.
+
+    Each block's lengths depend on its anchors' positions at angle 0, so the nodes are
+    decoded and placed at every angle one at a time: cos_t/sin_t (A,) start at angle 0,
+    and column 0 of xs/ys (12, A) is the decoding's angle-0 frame (the same float
+    operations as any other column). Fills ni (12, 4) int [kind, a, c, dir], nf (12, 5)
+    float [p0 .. p4], bi (15, 6) int [start, end, kind, parent, root, inversions] and bf
+    (15,) beam lengths; xs/ys receive the positions (meaningless at failed angles), ux/uy
+    (15, A) are scratch and ok (A,) receives per-angle success.
+
+    Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle, p3/p4=l1 times its cosine and
+    sine (the backup point's offset; only when l1 == l2, else 0). Extension: a=parent beam,
+    c=inverted, p0=length. Static: p0=x, p1=y. Crank tip: p0=crank length. An extension's
+    root is the crank or triangle beam its chain of parents starts from, and inversions
+    counts the inverted links on that chain (its angle is the root's plus that many pi).
+    """
+    ni[:] = -1
+    nf[:] = 0.0
+    bi[:] = -1
+    bf[:] = 0.0
+    ni[0, 0] = MOTOR
+    for s in range(3):
+        ni[1 + s, 0] = STATIC
+        nf[1 + s, 0] = float(int(g[2 * s] * 11) - 5)
+        nf[1 + s, 1] = float(int(g[2 * s + 1] * 11) - 5)
+    crank = 2.0 + 6.0 * g[CRANK_GENE]
+    ni[CRANK_TIP, 0] = CRANK
+    nf[CRANK_TIP, 0] = crank
+    set_beam(bi, bf, 0, 0, CRANK_TIP, B_CRANK, -1, crank)
+    place_base(nf, cos_t, sin_t, xs, ys, ux, uy)
+    ok[:] = True
+    n_beams = 1
+    for new in range(CRANK_TIP + 1, N_NODES):
+        o = FIRST_BLOCK + BLOCK_SIZE * (new - CRANK_TIP - 1)
+        if int(g[o] * 4) == 0:
+            parent = int(g[o + 1] * n_beams)
+            inverted = int(g[o + 3] * 2)
+            length = 12.0 * g[CRANK_GENE] + 3.0 if legacy else 2.0 + 13.0 * g[o + 6]
+            ni[new, 0] = EXTENSION
+            ni[new, 1] = parent
+            ni[new, 2] = inverted
+            nf[new, 0] = length
+            start = bi[parent, 0] if inverted else bi[parent, 1]
+            set_beam(bi, bf, n_beams, start, new, B_EXTENSION, parent, length)
+            chained = bi[parent, 2] == B_EXTENSION
+            bi[n_beams, 4] = bi[parent, 4] if chained else parent
+            bi[n_beams, 5] = inverted + (bi[parent, 5] if chained else 0)
+            place_extension(new, n_beams, ni, nf, bi, xs, ys, ux, uy)
+            n_beams += 1
+            continue
+        a = int(g[o + 1] * (new - 1)) + 1
+        c = int(g[o + 2] * (new - 1)) + 1
+        c = repair_anchor(a, c, new, xs, ys)
+        d = math.sqrt((xs[a, 0] - xs[c, 0]) ** 2 + (ys[a, 0] - ys[c, 0]) ** 2)
+        s1 = max(d - L_MAX, L_MIN)
+        l1 = (L_MAX - s1) * g[o + 5] + s1
+        lo = abs(d - l1)
+        hi = min(d + l1, L_MAX)
+        l2 = (hi - lo) * g[o + 6] + lo
+        ni[new, 0] = TRIANGLE
+        ni[new, 1] = a
+        ni[new, 2] = c
+        ni[new, 3] = int(g[o + 3] * 2)
+        nf[new, 0] = l1
+        nf[new, 1] = l2
+        nf[new, 2] = 2.0 * math.pi * g[o + 4]
+        if l1 == l2:  # the backup point serves only coincident anchors with r0 == r1
+            nf[new, 3] = l1 * math.cos(nf[new, 2])
+            nf[new, 4] = l1 * math.sin(nf[new, 2])
+        set_beam(bi, bf, n_beams, a, new, B_TRIANGLE, -1, l1)
+        set_beam(bi, bf, n_beams + 1, c, new, B_TRIANGLE, -1, l2)
+        place_triangle(new, ni, nf, legacy, xs, ys, ok)
+        n_beams += 2
+    return n_beams
+
+
+@numba.njit(**_JIT)
+def count_failed(ok):
+    """Returns the number of False entries of ok (A,): the error count."""
+    error = 0
+    for k in range(ok.shape[0]):
+        error += 0 if ok[k] else 1
+    return error
+
+
+@numba.njit(**_JIT)
 def simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid):
     """Simulates one decoded linkage over A crank angles; returns the error count.
 
@@ -364,10 +363,7 @@ def simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid):
         else:
             place_triangle(new, ni, nf, legacy, xs, ys, valid)
             b += 2
-    error = 0
-    for k in range(valid.shape[0]):
-        error += 0 if valid[k] else 1
-    return error
+    return count_failed(valid)
 
 
 @numba.njit(**_JIT)
@@ -721,10 +717,6 @@ def evaluate_batch(
         ys = np.empty((N_NODES, n_angles))
         ux = np.empty((MAX_BEAMS, n_angles))
         uy = np.empty((MAX_BEAMS, n_angles))
-        x0 = np.empty(N_NODES)
-        y0 = np.empty(N_NODES)
-        ux0 = np.empty(MAX_BEAMS)
-        uy0 = np.empty(MAX_BEAMS)
         depth = np.empty(N_NODES, np.int64)
         ancestors = np.empty(N_NODES, np.int64)
         ok = np.empty(n_angles, np.bool_)
@@ -735,8 +727,10 @@ def evaluate_batch(
         best = np.empty(targets.shape[0])
         spare = np.empty(targets.shape[0])
         for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
-            n_beams = decode_one(genomes[i], legacy, ni, nf, bi, bf, x0, y0, ux0, uy0)
-            err = simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, ok)
+            n_beams = decode_and_simulate(
+                genomes[i], legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok
+            )
+            err = count_failed(ok)
             f = find_foot(ys, ok, shift)
             ae = angle_error(f, ni, bi, n_beams, xs, ys, ok, theta, legacy, codes)
             error[i] = err
@@ -767,15 +761,21 @@ def evaluate_batch(
 
 @numba.njit(parallel=True, **_BATCH)
 def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
-    """Decodes every genome at angle 0 into the packed topology arrays (see decode.py)."""
+    """Decodes every genome at angle 0 into the packed topology arrays (see decode.py):
+    the decoding simulated at the one crank angle 0."""
+    cos_t = np.ones(1)
+    sin_t = np.zeros(1)
     for i in numba.prange(genomes.shape[0]):
-        px = np.empty(N_NODES)
-        py = np.empty(N_NODES)
-        ux = np.empty(MAX_BEAMS)
-        uy = np.empty(MAX_BEAMS)
-        n_beams[i] = decode_one(genomes[i], legacy, ni[i], nf[i], bi[i], bf[i], px, py, ux, uy)
-        pos0[i, :, 0] = px
-        pos0[i, :, 1] = py
+        xs = np.empty((N_NODES, 1))
+        ys = np.empty((N_NODES, 1))
+        ux = np.empty((MAX_BEAMS, 1))
+        uy = np.empty((MAX_BEAMS, 1))
+        ok = np.empty(1, np.bool_)
+        n_beams[i] = decode_and_simulate(
+            genomes[i], legacy, cos_t, sin_t, ni[i], nf[i], bi[i], bf[i], xs, ys, ux, uy, ok
+        )
+        pos0[i, :, 0] = xs[:, 0]
+        pos0[i, :, 1] = ys[:, 0]
 
 
 @numba.njit(parallel=True, **_BATCH)
