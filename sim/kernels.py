@@ -5,7 +5,7 @@ batch; the numpy-facing wrappers live in `decode.py`, `kinematics.py` and `evalu
 Per-linkage topology is packed into small arrays (see `decode.py` for their layout).
 Positions are (12, A) arrays, one column per crank angle: the topology is shared by every
 column, so the loops over columns carry no data-dependent branches and vectorise. The hot
-loops index whole arrays rather than slicing them (a slice is a reference-counted view).
+loops index whole arrays rather than slicing them (a slice builds a view on every use).
 """
 
 from __future__ import annotations
