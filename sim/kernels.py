@@ -140,6 +140,16 @@ def crank_angles(n_angles, legacy):
 
 
 @numba.njit(**_JIT)
+def fill_row(j, x, y, xs, ys):
+    """Writes the position (x, y) of a node that does not move to row j of xs/ys (12, A),
+    every column."""
+    for k in range(xs.shape[1]):
+        xs[j, k] = x
+    for k in range(xs.shape[1]):
+        ys[j, k] = y
+
+
+@numba.njit(**_JIT)
 def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
     """Places the motor, static nodes and crank tip in every column (crank angle).
 
@@ -148,17 +158,9 @@ def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
     vectorise.
     """
     n = xs.shape[1]
-    for k in range(n):
-        xs[0, k] = 0.0
-    for k in range(n):
-        ys[0, k] = 0.0
+    fill_row(0, 0.0, 0.0, xs, ys)
     for s in range(1, 4):
-        x = nf[s, 0]
-        y = nf[s, 1]
-        for k in range(n):
-            xs[s, k] = x
-        for k in range(n):
-            ys[s, k] = y
+        fill_row(s, nf[s, 0], nf[s, 1], xs, ys)
     crank = nf[CRANK_TIP, 0]
     for k in range(n):
         xs[CRANK_TIP, k] = crank * cos_t[k]
@@ -171,8 +173,8 @@ def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
 
 
 @numba.njit(**_JIT)
-def place_extension(new, b, ni, nf, bi, xs, ys, ux, uy):
-    """Places extension node `new` (its beam is b) in every column of xs/ys (12, A).
+def place_extension(new, b, ni, nf, bi, xs, ys, ux, uy, n):
+    """Places extension node `new` (its beam is b) in the first n columns of xs/ys (12, A).
 
     ux/uy (15, A) hold the directions of the crank and extension beams
     (docs/simulator.md); b's is written. A triangle parent's direction is computed from
@@ -185,7 +187,7 @@ def place_extension(new, b, ni, nf, bi, xs, ys, ux, uy):
     if bi[parent, 2] == B_TRIANGLE:
         s = bi[parent, 0]
         e = bi[parent, 1]
-        for k in range(xs.shape[1]):
+        for k in range(n):
             dx, dy = unit_direction(xs[e, k] - xs[s, k], ys[e, k] - ys[s, k])
             dx = sign * dx
             dy = sign * dy
@@ -194,7 +196,7 @@ def place_extension(new, b, ni, nf, bi, xs, ys, ux, uy):
             ux[b, k] = dx
             uy[b, k] = dy
         return
-    for k in range(xs.shape[1]):
+    for k in range(n):
         dx = sign * ux[parent, k]
         dy = sign * uy[parent, k]
         xs[new, k] = xs[start, k] + length * dx
@@ -258,6 +260,23 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
 
 
 @numba.njit(**_JIT)
+def place_fixed_triangle(new, ni, nf, legacy, xs, ys, ok):
+    """Places triangle node `new` whose anchors do not move: computed once, at column 0
+    (triangle_point: the same operations as place_triangle's), and copied to every column
+    of xs/ys (12, A); clears all of ok (A,) if it has no solution."""
+    a = ni[new, 1]
+    c = ni[new, 2]
+    side = 1.0 if ni[new, 3] == 0 else -1.0
+    x, y, good = triangle_point(
+        xs[a, 0], ys[a, 0], xs[c, 0], ys[c, 0], nf[new, 0], nf[new, 1], side,
+        nf[new, 3], nf[new, 4], legacy,
+    )  # fmt: skip
+    fill_row(new, x, y, xs, ys)
+    if not good:
+        ok[:] = False
+
+
+@numba.njit(**_JIT)
 def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok):
     """Decodes one genome (56,) and simulates it over A crank angles; returns the number
     of beams.
@@ -275,6 +294,10 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
     c=inverted, p0=length. Static: p0=x, p1=y. Crank tip: p0=crank length. An extension's
     root is the crank or triangle beam its chain of parents starts from, and inversions
     counts the inverted links on that chain (its angle is the root's plus that many pi).
+
+    A node moves when the crank tip is among its ancestors (bit j of `moves`). One that
+    does not (about a third of them in random genomes) is placed once and copied to every
+    column: the same operations on the same inputs, so the same bits.
     """
     ni[:] = -1
     nf[:] = 0.0
@@ -292,6 +315,7 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
     place_base(nf, cos_t, sin_t, xs, ys, ux, uy)
     ok[:] = True
     n_beams = 1
+    moves = 1 << CRANK_TIP
     for new in range(CRANK_TIP + 1, N_NODES):
         o = FIRST_BLOCK + BLOCK_SIZE * (new - CRANK_TIP - 1)
         if int(g[o] * 4) == 0:
@@ -307,7 +331,12 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
             chained = bi[parent, 2] == B_EXTENSION
             bi[n_beams, 4] = bi[parent, 4] if chained else parent
             bi[n_beams, 5] = inverted + (bi[parent, 5] if chained else 0)
-            place_extension(new, n_beams, ni, nf, bi, xs, ys, ux, uy)
+            if (moves >> bi[parent, 0]) & 1 or (moves >> bi[parent, 1]) & 1:
+                moves |= 1 << new
+                place_extension(new, n_beams, ni, nf, bi, xs, ys, ux, uy, xs.shape[1])
+            else:  # its children read its direction in column 0 only
+                place_extension(new, n_beams, ni, nf, bi, xs, ys, ux, uy, 1)
+                fill_row(new, xs[new, 0], ys[new, 0], xs, ys)
             n_beams += 1
             continue
         a = int(g[o + 1] * (new - 1)) + 1
@@ -331,7 +360,11 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
             nf[new, 4] = l1 * math.sin(nf[new, 2])
         set_beam(bi, bf, n_beams, a, new, B_TRIANGLE, -1, l1)
         set_beam(bi, bf, n_beams + 1, c, new, B_TRIANGLE, -1, l2)
-        place_triangle(new, ni, nf, legacy, xs, ys, ok)
+        if (moves >> a) & 1 or (moves >> c) & 1:
+            moves |= 1 << new
+            place_triangle(new, ni, nf, legacy, xs, ys, ok)
+        else:
+            place_fixed_triangle(new, ni, nf, legacy, xs, ys, ok)
         n_beams += 2
     return n_beams
 
@@ -358,7 +391,7 @@ def simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid):
     b = 1
     for new in range(CRANK_TIP + 1, N_NODES):
         if ni[new, 0] == EXTENSION:
-            place_extension(new, b, ni, nf, bi, xs, ys, ux, uy)
+            place_extension(new, b, ni, nf, bi, xs, ys, ux, uy, xs.shape[1])
             b += 1
         else:
             place_triangle(new, ni, nf, legacy, xs, ys, valid)
@@ -472,6 +505,17 @@ def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy, codes):
         if bi[b, 1] == foot:
             last = b
     up_by_sign(foot, ni, bi, last, xs, ys, theta, codes)
+    if not legacy:  # a count: the settled samples without branches, then the rest
+        count = 0
+        unsettled = 0
+        for k in range(n_angles):
+            count += 1 if valid[k] & (codes[k] == 1) else 0
+            unsettled += 1 if valid[k] & (codes[k] < 0) else 0
+        if unsettled:
+            for k in range(n_angles):
+                if valid[k] and codes[k] < 0 and points_up(foot, k, bi, n_beams, xs, ys, theta):
+                    count += 1
+        return float(count)
     prev = -1
     for k in range(n_angles - 1, -1, -1):
         if valid[k]:
@@ -485,12 +529,9 @@ def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy, codes):
         if up < 0:
             up = points_up(foot, k, bi, n_beams, xs, ys, theta)
         if up:
-            if legacy:
-                total += math.sqrt(
-                    (xs[foot, k] - xs[foot, prev]) ** 2 + (ys[foot, k] - ys[foot, prev]) ** 2
-                )
-            else:
-                total += 1.0
+            total += math.sqrt(
+                (xs[foot, k] - xs[foot, prev]) ** 2 + (ys[foot, k] - ys[foot, prev]) ** 2
+            )
         prev = k
     return total
 
@@ -636,10 +677,10 @@ def step_and_lift(px, py, n, y_min):
     for i in range(n):
         j = i + 1 if i + 1 < n else 0
         dx = px[j] - px[i]
-        sign = 1.0 if dx > 0.0 else (-1.0 if dx < 0.0 else 0.0)
+        along = dx * stance  # > 0 moving with the stance, < 0 against it
         in_band = (py[i] - y_min <= BAND) & (py[j] - y_min <= BAND)
-        f_s += abs(dx) if (sign == stance) & in_band else 0.0
-        rise = py[i] - y_min if sign == -stance else 0.0
+        f_s += abs(dx) if (along > 0.0) & in_band else 0.0
+        rise = py[i] - y_min if along < 0.0 else 0.0
         f_l = rise if rise > f_l else f_l
     return f_s, f_l
 
@@ -679,10 +720,11 @@ def structure(ni, bi, bf, n_beams, foot, depth, ancestors, st, i):
         ancestors[j] |= ancestors[p] | ancestors[q]
     size = 0
     n_moving = 0
+    chain = ancestors[foot]
     for j in range(N_NODES):
-        if (ancestors[foot] >> j) & 1:
-            size += 1
-            n_moving += (ancestors[j] >> CRANK_TIP) & 1
+        member = (chain >> j) & 1
+        size += member
+        n_moving += member & (ancestors[j] >> CRANK_TIP)
     st[i, 0] = mean_beam_length(bf, n_beams)
     st[i, 1] = depth[foot] * 10.0 / 9.0
     st[i, 2] = size * 10.0 / 13.0
@@ -730,13 +772,13 @@ def evaluate_batch(
             n_beams = decode_and_simulate(
                 genomes[i], legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok
             )
-            err = count_failed(ok)
             f = find_foot(ys, ok, shift)
             ae = angle_error(f, ni, bi, n_beams, xs, ys, ok, theta, legacy, codes)
-            error[i] = err
             foot[i] = f
             angle_err[i] = ae
             m = foot_path(xs, ys, f, ok, px, py, valid, foot_x, foot_y, i)
+            err = n_angles - m  # the failed angles
+            error[i] = err
             cx, cy, x_min, x_max, y_min, y_max = path_extent(px, py, m)
             f_s, f_l = step_and_lift(px, py, m, y_min)
             penalty = err + ae
