@@ -495,7 +495,7 @@ def points_up(foot, k, bi, n_beams, xs, ys, theta):
 def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy, codes):
     """Returns F_ae for one simulated linkage (paper: count; legacy: distance-weighted).
 
-    codes (A,) int8 is scratch.
+    codes (A,) int8 is scratch (see up_by_sign).
     """
     if ni[foot, 0] in (MOTOR, STATIC):
         return 0.0
@@ -516,6 +516,7 @@ def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy, codes):
                 if valid[k] and codes[k] < 0 and points_up(foot, k, bi, n_beams, xs, ys, theta):
                     count += 1
         return float(count)
+    # legacy: each upward sample weighs its distance from the previous recorded one
     prev = -1
     for k in range(n_angles - 1, -1, -1):
         if valid[k]:
