@@ -210,19 +210,22 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
     """Places triangle node `new` in every column of xs/ys (12, A); clears ok (A,) where
     it has no solution (positions there are left meaningless).
 
-    Anchors can coincide with the backup point taken only when r0 == r1, and the tangent
-    case is legacy's alone: every other triangle runs the generic circle_point, split in
-    two passes over the angles. The first stores 1/d' and a in the node's own rows, the
-    second reads them back and places the node: each pass has a shorter dependency chain
-    than one pass would, so more angles are in flight at once (docs/benchmarks.md). The
-    operations are circle_point's, in its order, so the results are the same bit for bit.
+    Anchors can coincide with the backup point taken only when r0 == r1: every other
+    triangle runs the generic circle_point, split in two passes over the angles. The first
+    stores 1/d' and a in the node's own rows, the second reads them back and places the
+    node: each pass has a shorter dependency chain than one pass would, so more angles are
+    in flight at once (docs/benchmarks.md). Legacy's tangent point P0 + r0 e is the generic
+    formula with a = r0, whose h is then a zero, so the first pass stores r0 there: adding
+    that zero changes no bit, as P0 + r0 e is never -0 (docs/simulator.md). Otherwise
+    the operations are triangle_point's, in its order, so the results are the same bit for
+    bit.
     """
     a = ni[new, 1]
     c = ni[new, 2]
     r0 = nf[new, 0]
     r1 = nf[new, 1]
     side = 1.0 if ni[new, 3] == 0 else -1.0
-    if legacy or r0 == r1:
+    if r0 == r1:
         back_x = nf[new, 3]
         back_y = nf[new, 4]
         for k in range(xs.shape[1]):
@@ -246,7 +249,8 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
         dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
         inv = 1.0 / dn
         xs[new, k] = inv
-        ys[new, k] = 0.5 * (k2 + dn * dn) * inv
+        along = 0.5 * (k2 + dn * dn) * inv
+        ys[new, k] = r0 if legacy & (abs(d - r0 + r1) < TOL) else along
     for k in range(n):
         p0x = xs[a, k]
         p0y = ys[a, k]

@@ -16,10 +16,16 @@ TEST_MOTORS = (
 TEST_IDS = [m["id"] for m in TEST_MOTORS]
 
 
+EMULATOR_LATENCY_MS = 50.0
+"""Reply allowance for the bus emulator, a Python thread of the test process: its replies
+wait on thread scheduling, not on a USB latency timer, and on a loaded 2-core machine the
+FTDI default's 2 x 16 + 2 ms has run out before one came (docs/hardware.md)."""
+
+
 def raw_config(port: str, **sections: dict) -> dict:
     """Returns a TOML-shaped test config; `sections` override whole tables' keys."""
     raw = {
-        "bus": {"port": port, "baudrate": 1_000_000, "latency_ms": 16.0},
+        "bus": {"port": port, "baudrate": 1_000_000, "latency_ms": EMULATOR_LATENCY_MS},
         "gait": {"rate_hz": 50.0, "speed_rpm": 30.0},
         "align": {"profile_velocity_rpm": 50.0, "tolerance_deg": 2.0, "timeout_s": 10.0},
         "safety": {"bus_watchdog_ms": 500},
