@@ -25,6 +25,9 @@ MAX_ANCHOR_DIST = 30.0
 MIN_ANCHOR_DIST = 0.1
 BAND = 0.5
 """F_sl contact band above the lowest sample."""
+NAN_OR_ONE = np.array([np.nan, 1.0])
+"""A failed (0) sample's foot position times NaN is NaN, a recorded (1) one's times 1 is
+itself, bit for bit (foot_path)."""
 
 # Node kinds (column 0 of the node table) and beam kinds.
 MOTOR, STATIC, CRANK, TRIANGLE, EXTENSION = 0, 1, 2, 3, 4
@@ -105,6 +108,13 @@ def set_beam(bi, bf, b, start, end, kind, parent, length):
     bi[b, 4] = b
     bi[b, 5] = 0
     bf[b] = length
+
+
+@numba.njit(**_INLINE)
+def add_to_graph(j, p, q, depth, ancestors):
+    """Records node j with parents p, q in the decode graph: depth and ancestors (12,)."""
+    depth[j] = 1 + max(depth[p], depth[q])
+    ancestors[j] = (1 << j) | ancestors[p] | ancestors[q]
 
 
 @numba.njit(**_JIT)
@@ -245,7 +255,7 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
         dx = xs[c, k] - xs[a, k]
         dy = ys[c, k] - ys[a, k]
         d = math.sqrt(dx * dx + dy * dy)
-        ok[k] = ok[k] & (d - TOL <= r_sum) & (d + TOL >= r_diff)
+        ok[k] = ok[k] & ((d - TOL <= r_sum) & (d + TOL >= r_diff))
         dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
         inv = 1.0 / dn
         xs[new, k] = inv
@@ -281,7 +291,9 @@ def place_fixed_triangle(new, ni, nf, legacy, xs, ys, ok):
 
 
 @numba.njit(**_JIT)
-def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok):
+def decode_and_simulate(
+    g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok, depth, ancestors
+):  # fmt: skip
     """Decodes one genome (56,) and simulates it over A crank angles; returns the number
     of beams.
 
@@ -291,7 +303,10 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
     operations as any other column). Fills ni (12, 4) int [kind, a, c, dir], nf (12, 5)
     float [p0 .. p4], bi (15, 6) int [start, end, kind, parent, root, inversions] and bf
     (15,) beam lengths; xs/ys receive the positions (meaningless at failed angles), ux/uy
-    (15, A) are scratch and ok (A,) receives per-angle success.
+    (15, A) are scratch and ok (A,) (bool, or int64 0/1) receives per-angle success. depth
+    and ancestors (12,) int64 receive each node's place in the decode graph
+    (docs/simulator.md, MAP-ST): its depth in beams and its ancestors, itself included, as
+    a 12-bit mask.
 
     Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle, p3/p4=l1 times its cosine and
     sine (the backup point's offset; only when l1 == l2, else 0). Extension: a=parent beam,
@@ -299,14 +314,19 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
     root is the crank or triangle beam its chain of parents starts from, and inversions
     counts the inverted links on that chain (its angle is the root's plus that many pi).
 
-    A node moves when the crank tip is among its ancestors (bit j of `moves`). One that
-    does not (about a third of them in random genomes) is placed once and copied to every
-    column: the same operations on the same inputs, so the same bits.
+    A node moves when the crank tip is among its ancestors. One that does not (about a
+    third of them in random genomes) is placed once and copied to every column: the same
+    operations on the same inputs, so the same bits.
     """
     ni[:] = -1
     nf[:] = 0.0
     bi[:] = -1
     bf[:] = 0.0
+    for j in range(CRANK_TIP):  # the robot connections: the motor and static nodes
+        depth[j] = 0
+        ancestors[j] = 1 << j
+    depth[CRANK_TIP] = 1
+    ancestors[CRANK_TIP] = (1 << CRANK_TIP) | 1  # the crank hangs from the motor
     ni[0, 0] = MOTOR
     for s in range(3):
         ni[1 + s, 0] = STATIC
@@ -319,7 +339,6 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
     place_base(nf, cos_t, sin_t, xs, ys, ux, uy)
     ok[:] = True
     n_beams = 1
-    moves = 1 << CRANK_TIP
     for new in range(CRANK_TIP + 1, N_NODES):
         o = FIRST_BLOCK + BLOCK_SIZE * (new - CRANK_TIP - 1)
         if int(g[o] * 4) == 0:
@@ -335,8 +354,8 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
             chained = bi[parent, 2] == B_EXTENSION
             bi[n_beams, 4] = bi[parent, 4] if chained else parent
             bi[n_beams, 5] = inverted + (bi[parent, 5] if chained else 0)
-            if (moves >> bi[parent, 0]) & 1 or (moves >> bi[parent, 1]) & 1:
-                moves |= 1 << new
+            add_to_graph(new, bi[parent, 0], bi[parent, 1], depth, ancestors)
+            if (ancestors[new] >> CRANK_TIP) & 1:
                 place_extension(new, n_beams, ni, nf, bi, xs, ys, ux, uy, xs.shape[1])
             else:  # its children read its direction in column 0 only
                 place_extension(new, n_beams, ni, nf, bi, xs, ys, ux, uy, 1)
@@ -364,8 +383,8 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
             nf[new, 4] = l1 * math.sin(nf[new, 2])
         set_beam(bi, bf, n_beams, a, new, B_TRIANGLE, -1, l1)
         set_beam(bi, bf, n_beams + 1, c, new, B_TRIANGLE, -1, l2)
-        if (moves >> a) & 1 or (moves >> c) & 1:
-            moves |= 1 << new
+        add_to_graph(new, a, c, depth, ancestors)
+        if (ancestors[new] >> CRANK_TIP) & 1:
             place_triangle(new, ni, nf, legacy, xs, ys, ok)
         else:
             place_fixed_triangle(new, ni, nf, legacy, xs, ys, ok)
@@ -375,7 +394,7 @@ def decode_and_simulate(g, legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy,
 
 @numba.njit(**_JIT)
 def count_failed(ok):
-    """Returns the number of False entries of ok (A,): the error count."""
+    """Returns the number of failed entries (False or 0) of ok (A,): the error count."""
     error = 0
     for k in range(ok.shape[0]):
         error += 0 if ok[k] else 1
@@ -499,15 +518,14 @@ def points_up(foot, k, bi, n_beams, xs, ys, theta):
 def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy, codes):
     """Returns F_ae for one simulated linkage (paper: count; legacy: distance-weighted).
 
-    codes (A,) int8 is scratch (see up_by_sign).
+    codes (A,) int64 is scratch (see up_by_sign).
     """
     if ni[foot, 0] in (MOTOR, STATIC):
         return 0.0
     n_angles = valid.shape[0]
     last = 0
     for b in range(n_beams):
-        if bi[b, 1] == foot:
-            last = b
+        last = b if bi[b, 1] == foot else last
     up_by_sign(foot, ni, bi, last, xs, ys, theta, codes)
     if not legacy:  # a count: the settled samples without branches, then the rest
         count = 0
@@ -542,60 +560,65 @@ def angle_error(foot, ni, bi, n_beams, xs, ys, valid, theta, legacy, codes):
 
 
 @numba.njit(**_JIT)
-def find_foot(ys, valid, shift):
+def find_foot(ys, valid, lows, rows):
     """Returns the node with the lowest y over the valid samples (first on ties).
 
-    ys (12, A); valid (A,); shift (A,) is scratch. A failed sample is shifted by +inf (its
-    y then becomes +inf or NaN, neither of which is ever lower), so that the loops carry no
-    branches; each row's minimum is taken in four independent lanes (the minimum does
-    not depend on the order).
+    ys (12, A); valid (A,); lows (A,) float and rows (A,) int64 are scratch. The motor's
+    and static nodes' y never change, so column 0 stands for them. For the others, one
+    vector loop over the angles takes each angle's lowest y and its row (the first on
+    ties); the foot is then the first row reaching the lowest of those, if that is lower
+    than every motor and static node.
     """
     n = valid.shape[0]
     for k in range(n):
-        shift[k] = 0.0 if valid[k] else np.inf
+        low = ys[CRANK_TIP, k]
+        row = CRANK_TIP
+        for j in range(CRANK_TIP + 1, N_NODES):  # unrolled by LLVM
+            y = ys[j, k]
+            lower = y < low
+            low = y if lower else low
+            row = j if lower else row
+        lows[k] = low if valid[k] else np.inf
+        rows[k] = row
     foot = 0
     best = np.inf
-    any_valid = False
+    any_valid = 0
     for k in range(n):
         any_valid |= valid[k]
-    if any_valid:  # the motor's and static nodes' y never change: column 0 will do
+    if any_valid:
         for j in range(CRANK_TIP):
             if ys[j, 0] < best:
                 best = ys[j, 0]
                 foot = j
-    for j in range(CRANK_TIP, ys.shape[0]):
-        low0 = low1 = low2 = low3 = np.inf
-        k = 0
-        while k + 4 <= n:
-            v0 = ys[j, k] + shift[k]
-            v1 = ys[j, k + 1] + shift[k + 1]
-            v2 = ys[j, k + 2] + shift[k + 2]
-            v3 = ys[j, k + 3] + shift[k + 3]
-            low0 = v0 if v0 < low0 else low0
-            low1 = v1 if v1 < low1 else low1
-            low2 = v2 if v2 < low2 else low2
-            low3 = v3 if v3 < low3 else low3
-            k += 4
-        while k < n:
-            v0 = ys[j, k] + shift[k]
-            low0 = v0 if v0 < low0 else low0
-            k += 1
-        low0 = low1 if low1 < low0 else low0
-        low2 = low3 if low3 < low2 else low2
-        low = low2 if low2 < low0 else low0
-        if low < best:
-            best = low
-            foot = j
+    low0 = low1 = low2 = low3 = np.inf  # four lanes: the minimum's order does not matter
+    k = 0
+    while k + 4 <= n:
+        low0 = lows[k] if lows[k] < low0 else low0
+        low1 = lows[k + 1] if lows[k + 1] < low1 else low1
+        low2 = lows[k + 2] if lows[k + 2] < low2 else low2
+        low3 = lows[k + 3] if lows[k + 3] < low3 else low3
+        k += 4
+    for j in range(k, n):
+        low0 = lows[j] if lows[j] < low0 else low0
+    low0 = low1 if low1 < low0 else low0
+    low2 = low3 if low3 < low2 else low2
+    low = low2 if low2 < low0 else low0
+    if low < best:
+        foot = N_NODES
+        for k in range(n):  # the first row reaching it: an integer minimum, which vectorises
+            row = rows[k] if lows[k] == low else N_NODES
+            foot = row if row < foot else foot
     return foot
 
 
 @numba.njit(**_JIT)
 def foot_path(xs, ys, f, ok, px, py, valid, foot_x, foot_y, i):
-    """Writes ok (A,) to valid[i], node f's samples to foot_x[i]/foot_y[i] (NaN where
-    failed) and the recorded ones, in order, to px/py (A,); returns their count.
+    """Writes ok (A,) int64 0/1 to valid[i], node f's samples to foot_x[i]/foot_y[i] (NaN
+    where failed) and the recorded ones, in order, to px/py (A,); returns their count.
 
     Written without branches: every sample is stored at px/py[count], and the count
-    moves on past the recorded ones only.
+    moves on past the recorded ones only; the NaN comes from a product with NAN_OR_ONE
+    (a select here compiled to branches, mispredicted where the validity changes).
     """
     n = 0
     for k in range(ok.shape[0]):
@@ -603,22 +626,24 @@ def foot_path(xs, ys, f, ok, px, py, valid, foot_x, foot_y, i):
         x = xs[f, k]
         y = ys[f, k]
         valid[i, k] = v
-        foot_x[i, k] = x if v else np.nan
-        foot_y[i, k] = y if v else np.nan
+        foot_x[i, k] = x * NAN_OR_ONE[v]
+        foot_y[i, k] = y * NAN_OR_ONE[v]
         px[n] = x
         py[n] = y
-        n += 1 if v else 0
+        n += v
     return n
 
 
 @numba.njit(**_JIT)
 def path_extent(px, py, n):
-    """Returns (centroid x, centroid y, x_min, x_max, y_min, y_max) of the first n >= 1
-    samples of px/py; the centroid sums run in sample order."""
+    """Returns (centroid x, centroid y, x_min, x_max, y_min, y_max, lowest) of the first
+    n >= 1 samples of px/py; lowest is the first sample at y_min, and the centroid sums run
+    in sample order."""
     cx = 0.0
     cy = 0.0
     x_min = x_max = px[0]
     y_min = y_max = py[0]
+    lowest = 0
     for k in range(n):
         x = px[k]
         y = py[k]
@@ -626,34 +651,62 @@ def path_extent(px, py, n):
         cy += y
         x_min = x if x < x_min else x_min
         x_max = x if x > x_max else x_max
+        lowest = k if y < y_min else lowest
         y_min = y if y < y_min else y_min
         y_max = y if y > y_max else y_max
-    return cx / n, cy / n, x_min, x_max, y_min, y_max
+    return cx / n, cy / n, x_min, x_max, y_min, y_max, lowest
+
+
+@numba.njit(**_INLINE)
+def squared_distance(ax, ay, bx, by):
+    """Returns the squared distance of points (ax, ay) and (bx, by)."""
+    ex = ax - bx
+    ey = ay - by
+    return ex * ex + ey * ey
 
 
 @numba.njit(**_JIT)
-def nearest_distance(px, py, n, cx, cy, tx, ty, best, spare):
+def nearest_distance(px, py, n, cx, cy, tx, ty, best, low_a, low_b):
     """Fills best (P,) with each target's distance to its nearest sample.
 
-    Samples px/py (first n used) are taken relative to their centroid (cx, cy); targets
-    are tx/ty (P,); spare (P,) is scratch. The inner loop runs over targets so that it
-    vectorises; each sample reads the running minima from one of best/spare and writes
-    them to the other (updating one array in place compiles to slow masked stores).
+    Samples px/py (first n used, finite) are taken relative to their centroid (cx, cy);
+    targets are tx/ty (P,); low_a/low_b (P,) are scratch for the running minima of the
+    squared distances. The inner loops run over targets so that they vectorise. Each pass
+    over the targets takes four samples (the last few go one by one), reads the running
+    minima from one of low_a/low_b and writes them to the other: updating one array in
+    place compiles to slow masked stores. A minimum does not depend on the order it is
+    taken in, so the distances are the same bits as one sample at a time.
     """
-    src = spare
-    dst = best
+    src = low_a
+    dst = low_b
     src[:] = np.inf
-    for i in range(n):
-        qx = px[i] - cx
-        qy = py[i] - cy
+    i = 0
+    while i + 4 <= n:
+        q0x, q0y = px[i] - cx, py[i] - cy
+        q1x, q1y = px[i + 1] - cx, py[i + 1] - cy
+        q2x, q2y = px[i + 2] - cx, py[i + 2] - cy
+        q3x, q3y = px[i + 3] - cx, py[i + 3] - cy
         for t in range(tx.shape[0]):
-            ex = tx[t] - qx
-            ey = ty[t] - qy
-            d2 = ex * ex + ey * ey
+            d0 = squared_distance(tx[t], ty[t], q0x, q0y)
+            d1 = squared_distance(tx[t], ty[t], q1x, q1y)
+            d2 = squared_distance(tx[t], ty[t], q2x, q2y)
+            d3 = squared_distance(tx[t], ty[t], q3x, q3y)
+            d0 = d1 if d1 < d0 else d0
+            d2 = d3 if d3 < d2 else d2
+            d0 = d2 if d2 < d0 else d0
             low = src[t]
-            dst[t] = d2 if d2 < low else low
+            dst[t] = d0 if d0 < low else low
         src, dst = dst, src
-    for t in range(tx.shape[0]):
+        i += 4
+    for j in range(i, n):
+        qx = px[j] - cx
+        qy = py[j] - cy
+        for t in range(tx.shape[0]):
+            d0 = squared_distance(tx[t], ty[t], qx, qy)
+            low = src[t]
+            dst[t] = d0 if d0 < low else low
+        src, dst = dst, src
+    for t in range(tx.shape[0]):  # best is neither scratch array, so this vectorises
         best[t] = math.sqrt(src[t])
 
 
@@ -667,14 +720,11 @@ def summed_distance(best, use):
 
 
 @numba.njit(**_JIT)
-def step_and_lift(px, py, n, y_min):
-    """Returns (F_s, F_l) of a compacted path of n samples, lowest y y_min
-    (docs/simulator.md); the loop is written with selects."""
+def step_and_lift(px, py, n, y_min, low):
+    """Returns (F_s, F_l) of a compacted path of n samples whose lowest y is y_min, first
+    reached at sample low (docs/simulator.md); the loop is written with selects."""
     if n < 2:
         return 0.0, 0.0
-    low = 0
-    while py[low] != y_min:
-        low += 1
     dx_low = px[low + 1 if low + 1 < n else 0] - px[low]
     stance = -1.0 if dx_low < 0.0 else 1.0
     f_s = 0.0
@@ -699,30 +749,13 @@ def mean_beam_length(bf, n_beams):
     return m / n_beams
 
 
-@numba.njit(**_INLINE)
-def node_parents(ni, bi, j):
-    """Returns node j's two parents in the decode graph (j >= 5; docs/simulator.md)."""
-    if ni[j, 0] == EXTENSION:
-        return bi[ni[j, 1], 0], bi[ni[j, 1], 1]
-    return ni[j, 1], ni[j, 2]
-
-
 @numba.njit(**_JIT)
-def structure(ni, bi, bf, n_beams, foot, depth, ancestors, st, i):
+def structure(bf, n_beams, foot, depth, ancestors, st, i):
     """Writes the MAP-ST values (m, depth, drive size, moving share) to st[i] (N, 4).
 
-    depth and ancestors (12,) int64 are scratch. Each node's ancestors (itself included)
-    are a 12-bit mask; a node moves when the crank tip is among them.
+    depth and ancestors (12,) int64 are the decode graph's, from decode_and_simulate; a
+    node moves when the crank tip is among its ancestors.
     """
-    for j in range(N_NODES):
-        depth[j] = 0
-        ancestors[j] = 1 << j
-    depth[CRANK_TIP] = 1
-    ancestors[CRANK_TIP] |= 1  # the motor
-    for j in range(CRANK_TIP + 1, N_NODES):
-        p, q = node_parents(ni, bi, j)
-        depth[j] = 1 + max(depth[p], depth[q])
-        ancestors[j] |= ancestors[p] | ancestors[q]
     size = 0
     n_moving = 0
     chain = ancestors[foot]
@@ -766,29 +799,32 @@ def evaluate_batch(
         uy = np.empty((MAX_BEAMS, n_angles))
         depth = np.empty(N_NODES, np.int64)
         ancestors = np.empty(N_NODES, np.int64)
-        ok = np.empty(n_angles, np.bool_)
-        codes = np.empty(n_angles, np.int8)
-        shift = np.empty(n_angles)
+        ok = np.empty(n_angles, np.int64)  # 0/1: int64 lanes need no packing to bytes
+        codes = np.empty(n_angles, np.int64)
+        lows = np.empty(n_angles)
+        rows = np.empty(n_angles, np.int64)
         px = np.empty(n_angles)
         py = np.empty(n_angles)
         best = np.empty(targets.shape[0])
-        spare = np.empty(targets.shape[0])
+        low_a = np.empty(targets.shape[0])
+        low_b = np.empty(targets.shape[0])
         for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
             n_beams = decode_and_simulate(
-                genomes[i], legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok
-            )
-            f = find_foot(ys, ok, shift)
+                genomes[i], legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok,
+                depth, ancestors,
+            )  # fmt: skip
+            f = find_foot(ys, ok, lows, rows)
             ae = angle_error(f, ni, bi, n_beams, xs, ys, ok, theta, legacy, codes)
             foot[i] = f
             angle_err[i] = ae
             m = foot_path(xs, ys, f, ok, px, py, valid, foot_x, foot_y, i)
             err = n_angles - m  # the failed angles
             error[i] = err
-            cx, cy, x_min, x_max, y_min, y_max = path_extent(px, py, m)
-            f_s, f_l = step_and_lift(px, py, m, y_min)
+            cx, cy, x_min, x_max, y_min, y_max, low = path_extent(px, py, m)
+            f_s, f_l = step_and_lift(px, py, m, y_min, low)
             penalty = err + ae
             if fitness in (FP, FP2):
-                nearest_distance(px, py, m, cx, cy, tx, ty, best, spare)
+                nearest_distance(px, py, m, cx, cy, tx, ty, best, low_a, low_b)
             if fitness == FP:
                 loss[i, 0] = summed_distance(best, every) + penalty
             elif fitness == FP2:
@@ -801,7 +837,7 @@ def evaluate_batch(
                 loss[i, 1] = -f_l + penalty
             wh[i, 0] = y_max - y_min
             wh[i, 1] = x_max - x_min
-            structure(ni, bi, bf, n_beams, f, depth, ancestors, st, i)
+            structure(bf, n_beams, f, depth, ancestors, st, i)
             lis[i, 0] = st[i, 0]
             lis[i, 1] = f_l
 
@@ -818,9 +854,12 @@ def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
         ux = np.empty((MAX_BEAMS, 1))
         uy = np.empty((MAX_BEAMS, 1))
         ok = np.empty(1, np.bool_)
+        depth = np.empty(N_NODES, np.int64)
+        ancestors = np.empty(N_NODES, np.int64)
         n_beams[i] = decode_and_simulate(
-            genomes[i], legacy, cos_t, sin_t, ni[i], nf[i], bi[i], bf[i], xs, ys, ux, uy, ok
-        )
+            genomes[i], legacy, cos_t, sin_t, ni[i], nf[i], bi[i], bf[i], xs, ys, ux, uy, ok,
+            depth, ancestors,
+        )  # fmt: skip
         pos0[i, :, 0] = xs[:, 0]
         pos0[i, :, 1] = ys[:, 0]
 
@@ -840,7 +879,7 @@ def simulate_batch(ni, nf, bi, n_beams, n_angles, legacy, positions, valid, bang
         ux = np.empty((MAX_BEAMS, n_angles))
         uy = np.empty((MAX_BEAMS, n_angles))
         simulate_one(ni[i], nf[i], bi[i], cos_t, sin_t, legacy, xs, ys, ux, uy, valid[i])
-        foot[i] = find_foot(ys, valid[i], np.empty(n_angles))
+        foot[i] = find_foot(ys, valid[i], np.empty(n_angles), np.empty(n_angles, np.int64))
         for k in range(n_angles):
             if valid[i, k]:
                 for b in range(n_beams[i]):
