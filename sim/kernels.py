@@ -48,6 +48,19 @@ _INLINE = {**_JIT, "inline": "always"}
 
 
 @numba.njit(**_INLINE)
+def distance_terms(dx, dy, r_sum, r_diff, k2):
+    """Returns (d, good, inv, along) of anchors (dx, dy) apart, for circles of radii r0, r1
+    (r_sum = r0 + r1, r_diff = |r0 - r1|, k2 = r0 * r0 - r1 * r1): their distance d,
+    whether the circles meet (within the tolerance), 1/d' for d' = d moved into the
+    tolerance band, and the distance a from P0 along the anchors' line (spec §2)."""
+    d = math.sqrt(dx * dx + dy * dy)
+    good = (d - TOL <= r_sum) & (d + TOL >= r_diff)
+    dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
+    inv = 1.0 / dn  # one division per triangle (docs/simulator.md, floating-point forms)
+    return d, good, inv, 0.5 * (k2 + dn * dn) * inv
+
+
+@numba.njit(**_INLINE)
 def circle_point(p0x, p0y, p1x, p1y, r0, r1, side):
     """Returns (x, y, good, d, ex, ey): spec §2 circle_intersection of anchors P0, P1 in
     the generic case (see triangle_point), written as selects.
@@ -58,15 +71,9 @@ def circle_point(p0x, p0y, p1x, p1y, r0, r1, side):
     """
     dx = p1x - p0x
     dy = p1y - p0y
-    d = math.sqrt(dx * dx + dy * dy)
-    r_sum = r0 + r1
-    r_diff = abs(r0 - r1)
-    good = (d - TOL <= r_sum) & (d + TOL >= r_diff)
-    dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
-    inv = 1.0 / dn  # one division per triangle (docs/simulator.md, floating-point forms)
+    d, good, inv, along = distance_terms(dx, dy, r0 + r1, abs(r0 - r1), r0 * r0 - r1 * r1)
     ex = dx * inv
     ey = dy * inv
-    along = 0.5 * (r0 * r0 - r1 * r1 + dn * dn) * inv
     h = side * math.sqrt(max(r0 * r0 - along * along, 0.0))
     return p0x + along * ex + h * ey, p0y + along * ey - h * ex, good, d, ex, ey
 
@@ -252,14 +259,11 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
     k2 = r0_sq - r1 * r1
     n = xs.shape[1]
     for k in range(n):
-        dx = xs[c, k] - xs[a, k]
-        dy = ys[c, k] - ys[a, k]
-        d = math.sqrt(dx * dx + dy * dy)
-        ok[k] = ok[k] & ((d - TOL <= r_sum) & (d + TOL >= r_diff))
-        dn = d - TOL if d > r_sum else (d + TOL if d < r_diff else d)
-        inv = 1.0 / dn
+        d, good, inv, along = distance_terms(
+            xs[c, k] - xs[a, k], ys[c, k] - ys[a, k], r_sum, r_diff, k2
+        )
+        ok[k] = ok[k] & good
         xs[new, k] = inv
-        along = 0.5 * (k2 + dn * dn) * inv
         ys[new, k] = r0 if legacy & (abs(d - r0 + r1) < TOL) else along
     for k in range(n):
         p0x = xs[a, k]
