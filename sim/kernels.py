@@ -234,8 +234,8 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
     in flight at once (docs/benchmarks.md). Legacy's tangent point P0 + r0 e is the generic
     formula with a = r0, whose h is then a zero, so the first pass stores r0 there: adding
     that zero changes no bit, as P0 + r0 e is never -0 (docs/simulator.md). Otherwise
-    the operations are triangle_point's, in its order, so the results are the same bit for
-    bit.
+    the first pass is circle_point's distance_terms and the second the rest of its
+    operations, in its order, so the results are the same bit for bit.
     """
     a = ni[new, 1]
     c = ni[new, 2]
