@@ -78,7 +78,8 @@ class DxlBus:
         port: serial device path (or the emulator's pty).
         baudrate: bits per second; one of the SDK's standard rates.
         latency_ms: USB adapter latency allowance per reply (FTDI default 16 ms).
-        retries: extra attempts for ping, read, write and reboot on a comm failure.
+        retries: extra attempts for ping, read, write, reboot and sync read on a comm
+            failure.
     """
 
     def __init__(
@@ -205,17 +206,34 @@ class DxlBus:
             reason = self._packets.getTxRxResult(result)
             raise CommError(f"sync write of {item.name} failed: {reason}", code=result)
 
-    def sync_read(self, items: tuple[ct.Item, ...], motor_ids: Iterable[int]) -> dict[int, Status]:
+    def sync_read(
+        self, items: tuple[ct.Item, ...], motor_ids: Iterable[int], *, retries: int | None = None
+    ) -> dict[int, Status]:
         """Returns each motor's values of a contiguous run of items, from one SYNC_READ.
 
         Uses the SDK's packet handler directly (not GroupSyncRead) so that each status
-        packet's error byte, and with it the hardware alert flag, is kept.
+        packet's error byte, and with it the hardware alert flag, is kept. A comm failure
+        re-sends the whole SYNC_READ, after clearing any partial reply from the port.
+
+        Args:
+            retries: extra attempts; None takes the bus's `retries`.
 
         Raises:
             MotorNotResponding: naming the first motor whose reply did not come.
         """
-        start, length = ct.block_span(items)
         ids = list(motor_ids)
+        attempts = 1 + (self._retries if retries is None else retries)
+        for attempt in range(attempts):
+            try:
+                return self._sync_read_once(items, ids)
+            except CommError:
+                if attempt == attempts - 1:
+                    raise
+                self.release()
+        raise AssertionError("unreachable")
+
+    def _sync_read_once(self, items: tuple[ct.Item, ...], ids: list[int]) -> dict[int, Status]:
+        start, length = ct.block_span(items)
         statuses = {}
         with self._lock:
             result = self._packets.syncReadTx(self._port, start, length, ids, len(ids), False)

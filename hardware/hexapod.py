@@ -121,9 +121,13 @@ class Hexapod:
                     f"{needed:.0f} units but its Velocity Limit is {limit}; lower [gait] speed_rpm"
                 )
 
-    def read_state(self) -> dict[int, Status]:
-        """Returns every motor's state block (126..146) from one sync read."""
-        return self.bus.sync_read(ct.STATE_BLOCK, self._ids)
+    def read_state(self, retries: int | None = None) -> dict[int, Status]:
+        """Returns every motor's state block (126..146) from one sync read.
+
+        Args:
+            retries: extra attempts after a comm failure; None takes the bus's.
+        """
+        return self.bus.sync_read(ct.STATE_BLOCK, self._ids, retries=retries)
 
     def positions(self, statuses: dict[int, Status]) -> np.ndarray:
         """Returns (N,) Present Positions in config order."""
@@ -227,14 +231,14 @@ class Hexapod:
                 stop.wait(-lag)
                 continue
             if lag > gait.max_lag_s:
-                behind = int(lag // period)
+                behind = min(int(lag // period), n_slots - slot)
                 skipped += behind
                 slot += behind
                 continue
             slot += 1
             now = self._clock()
             try:
-                statuses = self.read_state()
+                statuses = self.read_state(retries=0)  # a miss costs the tick, not a retry
             except MotorNotResponding:
                 missed += 1
                 missed_in_row += 1

@@ -153,6 +153,20 @@ def test_corrupt_reply_fails_without_retries_and_passes_with_them(emu):
         assert bus.read(3, ct.MODEL_NUMBER) == ct.MX28_MODEL_NUMBER
 
 
+def test_sync_read_resends_after_a_lost_reply_when_retries_allow(emu):
+    with DxlBus(emu.port, 1_000_000, retries=2) as bus:
+        emu.drop_replies(2, 1)
+        with pytest.raises(MotorNotResponding, match=r"motor 2 did not answer \(sync read\)"):
+            bus.sync_read(ct.STATE_BLOCK, IDS, retries=0)
+        emu.drop_replies(2, 1)
+        emu.corrupt_replies(2, 1)  # consumed by the round after the lost reply
+        statuses = bus.sync_read(ct.STATE_BLOCK, IDS)
+    assert sorted(statuses) == IDS
+    assert all(s.values["present_velocity"] == 0 for s in statuses.values())
+    sync_reads = [q for q in emu.packets() if q.instruction == p.SYNC_READ]
+    assert len(sync_reads) == 4  # one without retries, then lost, corrupt, answered
+
+
 def test_port_has_one_owner(bus, emu):
     with pytest.raises(PortError, match="cannot open port"):
         DxlBus(emu.port, 1_000_000).open()

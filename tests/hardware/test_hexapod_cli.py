@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import re
 import signal
 import subprocess
 import sys
@@ -13,12 +14,16 @@ import pytest
 from hexapod_fixtures import TEST_IDS
 
 from hardware import control_table as ct
+from hardware.config import GaitConfig
 from orchestrator.cli import main
 
 LINKEVO = Path(sys.executable).parent / "linkevo"
 
 
-def test_simulated_three_second_walk_holds_the_50_hz_clock(config_file, tmp_path, capsys):
+def test_simulated_three_second_walk_accounts_for_every_50_hz_slot(config_file, tmp_path, capsys):
+    """Every slot of the 50 Hz clock is a tick, a missed read or a skipped slot, and every
+    tick has its telemetry row. How many are ticks depends on the machine's load (a stall
+    beyond [gait] max_lag_s skips slots), so that count is printed, never asserted."""
     telemetry = tmp_path / "out" / "walk.csv"
     cfg = config_file("/dev/unused")
     code = main(
@@ -33,10 +38,13 @@ def test_simulated_three_second_walk_holds_the_50_hz_clock(config_file, tmp_path
         "time_s", "m1_position", "m1_velocity_rpm", "m1_load_percent", "m1_temperature_c"
     ]  # fmt: skip
     assert len(header) == 1 + 4 * len(TEST_IDS)
-    assert len(body) >= 150
+    out = capsys.readouterr().out
+    counts = re.search(r"(\d+) ticks at .* skipped (\d+), missed reads (\d+),", out)
+    ticks, skipped, missed = map(int, counts.groups())
+    assert ticks + skipped + missed == 150
+    assert len(body) == ticks > 0
     times = [float(r[0]) for r in body]
-    assert times == sorted(times) and times[-1] < 3.0
-    assert "150 ticks" in capsys.readouterr().out
+    assert times == sorted(times) and times[-1] < 3.0 + GaitConfig().max_lag_s
     assert not list(telemetry.parent.glob(".walk.csv.*"))
 
 

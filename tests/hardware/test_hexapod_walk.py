@@ -7,6 +7,7 @@ import itertools
 import os
 import signal
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -22,14 +23,14 @@ from hardware.errors import (
     StopRequested,
     WrongModel,
 )
-from hardware.gait import leg_phase, phase_separation
+from hardware.gait import leg_phase, phase_separation, wrap
 from hardware.hexapod import Hexapod
 from hardware.session import run_walk
 
 PHASE_TOLERANCE_DEG = 5.0
 """Tripods must stay within this of half a turn apart (and each leg of its own tripod)."""
-CLOCK_TOLERANCE_DEG = 30.0
-"""Every leg must stay within this of its clock target."""
+CLOCK_TOLERANCE_DEG = 10.0
+"""The median settled tick must have every leg within this of its clock target."""
 
 
 def assert_all_stopped(emu):
@@ -85,17 +86,35 @@ def test_start_up_align_and_walk_write_in_the_documented_order(emulator, config_
     assert_all_stopped(emu)
 
 
+def test_a_stall_longer_than_the_walk_skips_only_the_slots_left(emulator, config_for):
+    emu = emulator()
+    ticks = []  # after the fifth tick the clock jumps 60 s ahead, as if the process slept
+
+    def clock():
+        return time.monotonic() + (60.0 if len(ticks) >= 5 else 0.0)
+
+    with Hexapod(config_for(emu.port), clock=clock) as robot:
+        robot.start_up()
+        result = robot.walk(0.5, on_tick=ticks.append)
+    assert result.ticks == len(ticks) == 5
+    assert result.ticks + result.skipped_ticks + result.missed_reads == 25
+    assert result.duration_s > 60.0
+    assert_all_stopped(emu)
+
+
 def test_ten_second_walk_keeps_tripods_half_a_turn_apart(emulator, config_for, tmp_path):
     emu = emulator()
     config = config_for(emu.port)
     telemetry = tmp_path / "walk.csv"
     result = run_walk(config, 10.0, telemetry=telemetry)
     time_s, positions, velocities = read_telemetry(telemetry)
-    assert len(time_s) == result.ticks >= 450
+    assert len(time_s) == result.ticks
+    assert result.ticks + result.skipped_ticks + result.missed_reads == 500
     zeros = np.array([m.zero for m in config.motors])
     directions = np.array([m.direction for m in config.motors])
     tripod_a = np.array([m.phase_deg == 0.0 for m in config.motors])
     settled = time_s >= 1.0
+    assert settled.sum() >= 50  # the checks below are not vacuous, however loaded the machine
     tolerance = np.radians(PHASE_TOLERANCE_DEG)
     for row in positions[settled]:
         phases = leg_phase(row, zeros, directions)
@@ -108,9 +127,14 @@ def test_ten_second_walk_keeps_tripods_half_a_turn_apart(emulator, config_for, t
     expected_turns = config.gait.speed_rpm / 60.0 * (time_s[-1] - time_s[0])
     assert np.allclose(turns, expected_turns, rtol=0.05)
     assert np.all(np.sign(velocities[settled]) == directions)
-    # Against the clock itself, the delay between a tick's time stamp and the emulator's
-    # sampling adds jitter (large on a loaded CI machine), hence a looser bound.
-    assert result.max_phase_error_rad <= np.radians(CLOCK_TOLERANCE_DEG)
+    # Against the clock itself: a stall between a tick's time stamp and the emulator's
+    # sampling shows as phase error in that tick (and in the catch-up after it), so the
+    # bound holds the median settled tick, not the worst one (tests assert no timings).
+    offsets = np.radians([m.phase_deg for m in config.motors])
+    targets = 2 * np.pi * config.gait.speed_rpm / 60.0 * time_s[settled, None] + offsets
+    measured = np.array([leg_phase(row, zeros, directions) for row in positions[settled]])
+    worst_leg = np.abs(wrap(targets - measured)).max(axis=1)
+    assert np.median(worst_leg) <= np.radians(CLOCK_TOLERANCE_DEG)
     assert_all_stopped(emu)
 
 
