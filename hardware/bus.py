@@ -144,19 +144,27 @@ class DxlBus:
                 number=error & ~ALERT_BIT,
             )
 
+    def _retrying(self, attempt: Callable[[], T], retries: int | None = None) -> T:
+        """Returns attempt()'s value, running it again while it raises CommError, up to
+        `retries` more times (None: the bus's). The SDK clears the port before each
+        transmission, discarding what the failed attempt left there."""
+        for _ in range(self._retries if retries is None else retries):
+            try:
+                return attempt()
+            except CommError:
+                pass
+        return attempt()
+
     def _transact(self, motor_id: int, action: str, call: Callable[[], tuple[T, int, int]]) -> T:
         """Runs `call() -> (value, result, error)` with retries on comm failures."""
-        for attempt in range(self._retries + 1):
+
+        def attempt() -> T:
             with self._lock:
                 value, result, error = call()
-            try:
-                self._check(motor_id, action, result, error)
-            except CommError:
-                if attempt == self._retries:
-                    raise
-                continue
+            self._check(motor_id, action, result, error)
             return value
-        raise AssertionError("unreachable")
+
+        return self._retrying(attempt)
 
     def ping(self, motor_id: int) -> int:
         """Returns the motor's model number."""
@@ -213,7 +221,7 @@ class DxlBus:
 
         Uses the SDK's packet handler directly (not GroupSyncRead) so that each status
         packet's error byte, and with it the hardware alert flag, is kept. A comm failure
-        re-sends the whole SYNC_READ, after clearing any partial reply from the port.
+        re-sends the whole SYNC_READ.
 
         Args:
             retries: extra attempts; None takes the bus's `retries`.
@@ -222,15 +230,7 @@ class DxlBus:
             MotorNotResponding: naming the first motor whose reply did not come.
         """
         ids = list(motor_ids)
-        attempts = 1 + (self._retries if retries is None else retries)
-        for attempt in range(attempts):
-            try:
-                return self._sync_read_once(items, ids)
-            except CommError:
-                if attempt == attempts - 1:
-                    raise
-                self.release()
-        raise AssertionError("unreachable")
+        return self._retrying(lambda: self._sync_read_once(items, ids), retries)
 
     def _sync_read_once(self, items: tuple[ct.Item, ...], ids: list[int]) -> dict[int, Status]:
         start, length = ct.block_span(items)
