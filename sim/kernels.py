@@ -167,15 +167,22 @@ def fill_row(j, x, y, xs, ys):
 
 
 @numba.njit(**_JIT)
-def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
-    """Places the motor, static nodes and crank tip in every column (crank angle).
-
-    xs/ys (12, A) receive positions; ux/uy (15, A) the crank's direction in row 0. Each
-    loop writes one row: a loop writing several rows of arrays that might overlap does not
-    vectorise.
-    """
-    n = xs.shape[1]
+def place_motor(cos_t, sin_t, xs, ys, ux, uy):
+    """Places the motor (row 0 of xs/ys (12, A)) and the crank's direction (row 0 of
+    ux/uy (15, A)): the same for every linkage, so written once per scratch array."""
     fill_row(0, 0.0, 0.0, xs, ys)
+    for k in range(xs.shape[1]):
+        ux[0, k] = cos_t[k]
+    for k in range(xs.shape[1]):
+        uy[0, k] = sin_t[k]
+
+
+@numba.njit(**_JIT)
+def place_base(nf, cos_t, sin_t, xs, ys):
+    """Places the static nodes and crank tip in every column (crank angle) of xs/ys
+    (12, A). Each loop writes one row: a loop writing several rows of arrays that might
+    overlap does not vectorise."""
+    n = xs.shape[1]
     for s in range(1, 4):
         fill_row(s, nf[s, 0], nf[s, 1], xs, ys)
     crank = nf[CRANK_TIP, 0]
@@ -183,10 +190,6 @@ def place_base(nf, cos_t, sin_t, xs, ys, ux, uy):
         xs[CRANK_TIP, k] = crank * cos_t[k]
     for k in range(n):
         ys[CRANK_TIP, k] = crank * sin_t[k]
-    for k in range(n):
-        ux[0, k] = cos_t[k]
-    for k in range(n):
-        uy[0, k] = sin_t[k]
 
 
 @numba.njit(**_JIT)
@@ -307,10 +310,10 @@ def decode_and_simulate(
     operations as any other column). Fills ni (12, 4) int [kind, a, c, dir], nf (12, 5)
     float [p0 .. p4], bi (15, 6) int [start, end, kind, parent, root, inversions] and bf
     (15,) beam lengths; xs/ys receive the positions (meaningless at failed angles), ux/uy
-    (15, A) are scratch and ok (A,) (bool, or int64 0/1) receives per-angle success. depth
-    and ancestors (12,) int64 receive each node's place in the decode graph
-    (docs/simulator.md, MAP-ST): its depth in beams and its ancestors, itself included, as
-    a 12-bit mask.
+    (15, A) are scratch, and row 0 of xs/ys and ux/uy must hold what place_motor writes.
+    ok (A,) (bool, or int64 0/1) receives per-angle success. depth and ancestors (12,)
+    int64 receive each node's place in the decode graph (docs/simulator.md, MAP-ST): its
+    depth in beams and its ancestors, itself included, as a 12-bit mask.
 
     Triangle: a=A, c=C, dir, p0=l1, p1=l2, p2=backup angle, p3/p4=l1 times its cosine and
     sine (the backup point's offset; only when l1 == l2, else 0). Extension: a=parent beam,
@@ -340,7 +343,7 @@ def decode_and_simulate(
     ni[CRANK_TIP, 0] = CRANK
     nf[CRANK_TIP, 0] = crank
     set_beam(bi, bf, 0, 0, CRANK_TIP, B_CRANK, -1, crank)
-    place_base(nf, cos_t, sin_t, xs, ys, ux, uy)
+    place_base(nf, cos_t, sin_t, xs, ys)
     ok[:] = True
     n_beams = 1
     for new in range(CRANK_TIP + 1, N_NODES):
@@ -410,10 +413,11 @@ def simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid):
     """Simulates one decoded linkage over A crank angles; returns the error count.
 
     cos_t/sin_t (A,) are the crank angles' cosines and sines; xs/ys (12, A) receive the
-    positions (meaningless at failed angles); ux/uy (15, A) are scratch; valid (A,)
-    receives per-angle success.
+    positions (meaningless at failed angles); ux/uy (15, A) are scratch, and row 0 of
+    xs/ys and ux/uy must hold what place_motor writes; valid (A,) receives per-angle
+    success.
     """
-    place_base(nf, cos_t, sin_t, xs, ys, ux, uy)
+    place_base(nf, cos_t, sin_t, xs, ys)
     valid[:] = True
     b = 1
     for new in range(CRANK_TIP + 1, N_NODES):
@@ -812,6 +816,7 @@ def evaluate_batch(
         best = np.empty(targets.shape[0])
         low_a = np.empty(targets.shape[0])
         low_b = np.empty(targets.shape[0])
+        place_motor(cos_t, sin_t, xs, ys, ux, uy)
         for i in range(chunk * n // n_chunks, (chunk + 1) * n // n_chunks):
             n_beams = decode_and_simulate(
                 genomes[i], legacy, cos_t, sin_t, ni, nf, bi, bf, xs, ys, ux, uy, ok,
@@ -860,6 +865,7 @@ def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
         ok = np.empty(1, np.bool_)
         depth = np.empty(N_NODES, np.int64)
         ancestors = np.empty(N_NODES, np.int64)
+        place_motor(cos_t, sin_t, xs, ys, ux, uy)
         n_beams[i] = decode_and_simulate(
             genomes[i], legacy, cos_t, sin_t, ni[i], nf[i], bi[i], bf[i], xs, ys, ux, uy, ok,
             depth, ancestors,
@@ -882,6 +888,7 @@ def simulate_batch(ni, nf, bi, n_beams, n_angles, legacy, positions, valid, bang
         ys = np.empty((N_NODES, n_angles))
         ux = np.empty((MAX_BEAMS, n_angles))
         uy = np.empty((MAX_BEAMS, n_angles))
+        place_motor(cos_t, sin_t, xs, ys, ux, uy)
         simulate_one(ni[i], nf[i], bi[i], cos_t, sin_t, legacy, xs, ys, ux, uy, valid[i])
         foot[i] = find_foot(ys, valid[i], np.empty(n_angles), np.empty(n_angles, np.int64))
         for k in range(n_angles):
