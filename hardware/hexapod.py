@@ -34,6 +34,8 @@ class WalkResult:
         skipped_ticks: slots dropped because the loop fell behind by more than max_lag_s.
         missed_reads: ticks whose sync read failed (tolerated up to max_missed_ticks in a row).
         reboots: motors rebooted by the hardware-error policy.
+        watchdog_rearms: times the Bus Watchdog was cleared and set again because the
+            loop had been silent for more than half its period (a stalled host).
         max_phase_error_rad: largest |phase error| of any leg after the first second.
         stopped_early: True when a stop was requested before the time was up.
     """
@@ -43,6 +45,7 @@ class WalkResult:
     skipped_ticks: int
     missed_reads: int
     reboots: int
+    watchdog_rearms: int
     max_phase_error_rad: float
     stopped_early: bool
 
@@ -69,6 +72,7 @@ class Hexapod:
         self._clock = clock
         self._ids = config.motor_ids
         self.velocity_limits = np.zeros(len(self._ids), dtype=int)
+        self._watchdog = config.safety.bus_watchdog_ms // ct.BUS_WATCHDOG_MS_PER_UNIT
         self._open = False
 
     def __enter__(self) -> Hexapod:
@@ -165,12 +169,22 @@ class Hexapod:
         self._each(ct.TORQUE_ENABLE, 0)
 
     def _enter_velocity_mode(self, motor_ids: list[int]) -> None:
-        watchdog = self.config.safety.bus_watchdog_ms // ct.BUS_WATCHDOG_MS_PER_UNIT
         for motor_id in motor_ids:
             self.bus.write(motor_id, ct.OPERATING_MODE, ct.VELOCITY_MODE)
             self.bus.write(motor_id, ct.GOAL_VELOCITY, 0)
             self.bus.write(motor_id, ct.TORQUE_ENABLE, 1)
-            self.bus.write(motor_id, ct.BUS_WATCHDOG, watchdog)
+            self.bus.write(motor_id, ct.BUS_WATCHDOG, self._watchdog)
+
+    def _rearm_watchdog(self, silence_s: float) -> None:
+        """Clears a Bus Watchdog that may have tripped (it then refuses goal writes and
+        holds Goal Velocity 0) by writing 0, and sets it again."""
+        _log.warning(
+            "no goal write for %.0f ms (bus watchdog %d ms): re-arming the watchdog",
+            silence_s * 1000.0,
+            self._watchdog * ct.BUS_WATCHDOG_MS_PER_UNIT,
+        )
+        self.bus.sync_write(ct.BUS_WATCHDOG, dict.fromkeys(self._ids, 0))
+        self.bus.sync_write(ct.BUS_WATCHDOG, dict.fromkeys(self._ids, self._watchdog))
 
     def _handle_alerts(self, monitor: SafetyMonitor, t: float, statuses: dict[int, Status]) -> int:
         """Decodes each alerting motor's Hardware Error Status; returns the reboots done."""
@@ -207,6 +221,9 @@ class Hexapod:
 
         Tick k is due at `t0 + k / rate_hz`; a late tick runs at once, and only when the
         loop is more than `max_lag_s` behind are the missed slots skipped (and counted).
+        When more than half the Bus Watchdog's period has passed since the last goal
+        write, the watchdog may have tripped on a motor, so it is re-armed before the
+        next goal write (and counted): a stalled host stops the legs only for the stall.
 
         Raises:
             SafetyStop: a limit or hardware error (see `SafetyMonitor`).
@@ -219,9 +236,11 @@ class Hexapod:
         monitor = SafetyMonitor(safety, self.config.motors)
         self._enter_velocity_mode(self._ids)
         stop = stop or threading.Event()
-        ticks = skipped = missed = missed_in_row = reboots = 0
+        ticks = skipped = missed = missed_in_row = reboots = rearms = 0
         max_error = 0.0
-        t0 = self._clock()
+        watchdog_s = self._watchdog * ct.BUS_WATCHDOG_MS_PER_UNIT / 1000.0
+        rearm_after_s = watchdog_s / 2 if watchdog_s else np.inf
+        t0 = last_write = self._clock()
         controller.reset(t0)
         slot = 0
         while slot < n_slots and not stop.is_set():
@@ -255,7 +274,12 @@ class Hexapod:
                 errors = np.abs(controller.phase_errors(now, positions))
                 max_error = max(max_error, float(errors.max()))
             velocities = dict(zip(self._ids, goals.tolist(), strict=True))
+            silence_s = self._clock() - last_write
+            if silence_s > rearm_after_s:
+                self._rearm_watchdog(silence_s)
+                rearms += 1
             self.bus.sync_write(ct.GOAL_VELOCITY, velocities)
+            last_write = self._clock()
             ticks += 1
             if on_tick is not None:
                 on_tick(TickRecord(now - t0, statuses, velocities))
@@ -267,6 +291,7 @@ class Hexapod:
             skipped_ticks=skipped,
             missed_reads=missed,
             reboots=reboots,
+            watchdog_rearms=rearms,
             max_phase_error_rad=max_error,
             stopped_early=stop.is_set() and slot < n_slots,
         )

@@ -101,6 +101,7 @@ def walk_handler(args: argparse.Namespace) -> int:
         f"walked {result.duration_s:.2f} s: {result.ticks} ticks at {result.rate_hz:.1f} Hz "
         f"(target {config.gait.rate_hz:g} Hz), skipped {result.skipped_ticks}, "
         f"missed reads {result.missed_reads}, reboots {result.reboots}, "
+        f"watchdog re-arms {result.watchdog_rearms}, "
         f"max phase error {math.degrees(result.max_phase_error_rad):.1f}°"
     )
     if args.telemetry is not None:

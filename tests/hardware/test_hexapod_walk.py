@@ -49,6 +49,12 @@ def read_telemetry(path):
     return time_s, positions, velocities
 
 
+def is_watchdog_write(packet):
+    """Returns whether a logged packet is a SYNC_WRITE of Bus Watchdog (a re-arm)."""
+    address = int.from_bytes(packet.params[:2], "little")
+    return packet.instruction == p.SYNC_WRITE and address == ct.BUS_WATCHDOG.address
+
+
 def test_start_up_align_and_walk_write_in_the_documented_order(emulator, config_for):
     emu = emulator()
     config = config_for(emu.port)
@@ -75,8 +81,11 @@ def test_start_up_align_and_walk_write_in_the_documented_order(emulator, config_
         writes = [w for i, w in enumerate(writes) if i == 0 or writes[i - 1] != w]
         assert writes == expected, f"motor {motor_id}"
     assert emu.snapshot(1).return_delay_time == 0
-    # Per tick: one SYNC_READ, then one SYNC_WRITE (none after a missed read).
-    walking = [q.instruction for q in emu.packets()[walk_from:]]
+    # Per tick: one SYNC_READ, then one SYNC_WRITE (none after a missed read). A stall of
+    # the host adds a watchdog re-arm (two SYNC_WRITEs) before a tick's goal write.
+    walking = emu.packets()[walk_from:]
+    assert sum(map(is_watchdog_write, walking)) == 2 * result.watchdog_rearms
+    walking = [q.instruction for q in walking if not is_watchdog_write(q)]
     first_read = walking.index(p.SYNC_READ)
     loop = walking[first_read : walking.index(p.WRITE, first_read) - 1]
     assert set(loop) == {p.SYNC_READ, p.SYNC_WRITE}
@@ -100,6 +109,37 @@ def test_a_stall_longer_than_the_walk_skips_only_the_slots_left(emulator, config
     assert result.ticks == len(ticks) == 5
     assert result.ticks + result.skipped_ticks + result.missed_reads == 25
     assert result.duration_s > 60.0
+    assert_all_stopped(emu)
+
+
+def test_a_host_stall_past_the_bus_watchdog_rearms_it_and_the_legs_walk_on(emulator, config_for):
+    emu = emulator()
+    config = config_for(emu.port)
+    watchdog_s = config.safety.bus_watchdog_ms / 1000.0
+    records = []
+
+    def on_tick(record):
+        records.append(record)
+        if len(records) == 10:
+            time.sleep(watchdog_s + 0.3)  # the host stalls: every motor's watchdog trips
+
+    with Hexapod(config) as robot:
+        robot.start_up()
+        started = len(emu.packets())
+        result = robot.walk(2.0, on_tick=on_tick)
+    directions = np.array([m.direction for m in config.motors])
+
+    def present_velocities(record):
+        return np.array([record.statuses[i].values["present_velocity"] for i in TEST_IDS])
+
+    assert np.all(present_velocities(records[10]) == 0)  # the trip stopped every leg
+    assert np.all(np.sign(present_velocities(records[-1])) == directions)  # walking again
+    assert result.watchdog_rearms >= 1
+    since = emu.packets()[started].time
+    writes = [w for w in emu.writes() if w.time >= since]
+    values = [w.value for w in writes if w.address == ct.BUS_WATCHDOG.address]
+    rearm = [0] * len(TEST_IDS) + [config.safety.bus_watchdog_ms // 20] * len(TEST_IDS)
+    assert values[len(TEST_IDS) :] == rearm * result.watchdog_rearms  # after walk's own
     assert_all_stopped(emu)
 
 
@@ -127,7 +167,11 @@ def test_ten_second_walk_keeps_tripods_half_a_turn_apart(emulator, config_for, t
     turns = (positions[-1] - positions[0]) * directions / ct.POSITION_UNITS_PER_TURN
     expected_turns = config.gait.speed_rpm / 60.0 * (time_s[-1] - time_s[0])
     assert np.allclose(turns, expected_turns, rtol=0.05)
-    assert np.all(np.sign(velocities[settled]) == directions)
+    # A tick after a host stall longer than the Bus Watchdog may read stopped legs (the
+    # watchdog is re-armed before its goal write); every other one turns its leg's way.
+    watchdog_s = config.safety.bus_watchdog_ms / 1000.0
+    after_stall = np.diff(time_s, prepend=time_s[0]) > watchdog_s / 2
+    assert np.all(np.sign(velocities[settled & ~after_stall]) == directions)
     # Against the clock itself: a stall between a tick's time stamp and the emulator's
     # sampling shows as phase error in that tick (and in the catch-up after it), so the
     # bound holds the median settled tick, not the worst one (tests assert no timings).
