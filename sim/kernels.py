@@ -626,11 +626,12 @@ def foot_path(xs, ys, f, ok, px, py, valid, foot_x, foot_y, i):
 
     Written without branches: every sample is stored at px/py[count], and the count
     moves on past the recorded ones only; the NaN comes from a product with NAN_OR_ONE
-    (a select here compiled to branches, mispredicted where the validity changes).
+    (a select here compiled to branches, mispredicted where the validity changes). The
+    count and the flag are unsigned: a signed index costs a wraparound select per use.
     """
-    n = 0
+    n = np.uint64(0)
     for k in range(ok.shape[0]):
-        v = ok[k]
+        v = np.uint64(ok[k])
         x = xs[f, k]
         y = ys[f, k]
         valid[i, k] = v
@@ -639,7 +640,7 @@ def foot_path(xs, ys, f, ok, px, py, valid, foot_x, foot_y, i):
         px[n] = x
         py[n] = y
         n += v
-    return n
+    return np.int64(n)
 
 
 @numba.njit(**_JIT)
