@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numba
 import numpy as np
 
@@ -51,7 +53,7 @@ def evaluate(
     if out is None:
         out = Evaluation.empty(n, n_angles, n_obj)
     else:
-        check_out(out, n, n_angles, n_obj)
+        check_out(out, n, n_angles, n_obj, genomes)
     if n:
         d = out.descriptors
         kernels.evaluate_batch(
@@ -63,9 +65,13 @@ def evaluate(
     return out
 
 
-def check_out(out: Evaluation, n: int, n_angles: int, n_objectives: int) -> None:
+def check_out(
+    out: Evaluation, n: int, n_angles: int, n_objectives: int, genomes: np.ndarray
+) -> None:
     """Raises ValueError unless `out` holds writable, C-contiguous arrays of the shapes and
-    dtypes of an Evaluation of n genomes over n_angles with n_objectives losses."""
+    dtypes of an Evaluation of n genomes over n_angles with n_objectives losses, none of
+    them overlapping another or the (C-contiguous) genomes: the kernel's helpers assume
+    that their arrays never overlap (`sim.kernels._JIT`)."""
     arrays = out.arrays()
     for name, shape, dtype in field_shapes(n, n_angles, n_objectives):
         array = arrays.get(name)
@@ -80,4 +86,15 @@ def check_out(out: Evaluation, n: int, n_angles: int, n_objectives: int) -> None
             raise ValueError(
                 f"out {name} must be a writable C-contiguous {np.dtype(dtype)} array of "
                 f"shape {shape}, got {got}"
+            )
+    spans = sorted(
+        (a.ctypes.data, a.ctypes.data + a.nbytes, name)
+        for name, a in {"genomes": genomes, **{f"out {k}": v for k, v in arrays.items()}}.items()
+        if a.nbytes
+    )
+    for (_, end, first), (start, _, second) in itertools.pairwise(spans):
+        if start < end:  # sorted by start, so any overlap shows between neighbours
+            raise ValueError(
+                f"{second} overlaps {first} in memory; every result needs an array of "
+                "its own, apart from the genomes"
             )

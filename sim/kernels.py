@@ -37,12 +37,34 @@ CRANK_TIP = 4
 # Fitness codes.
 FP, FSL, FP2, FSL2 = 0, 1, 2, 3
 
+
+def noalias_option() -> dict[str, bool]:
+    """Returns the jit option `_noalias=True`, which compiles a function with every pointer
+    argument (so every array's data) marked `noalias` for LLVM; {} where this numba lacks
+    the flag behind it.
+
+    numba has the flag (`Flags.noalias`, which its parfor lowering sets on the loop bodies
+    it outlines) but maps no decorator option to it, so this adds the mapping. Without it
+    the helpers compile as before: the same results, more slowly.
+    """
+    from numba.core import compiler, cpu, options
+
+    if not (hasattr(compiler.Flags, "noalias") and hasattr(options.TargetOptions, "Mapping")):
+        return {}
+    cpu.CPUTargetOptions._noalias = options.TargetOptions.Mapping("noalias")
+    return {"_noalias": True}
+
+
 _BATCH = {"cache": True, "nogil": True, "error_model": "numpy"}
 """For the batch entry points, which allocate their scratch arrays."""
-_JIT = {**_BATCH, "_nrt": False}
-"""For the per-linkage helpers: they never allocate, so they are compiled without numba's
-reference counting, which otherwise costs two calls per array argument per call (about 6 %
-of the whole evaluation)."""
+_JIT = {**_BATCH, "_nrt": False, "forceinline": True, **noalias_option()}
+"""For the per-linkage helpers. They never allocate, so they are compiled without numba's
+reference counting, which otherwise costs two calls per array argument per call. LLVM
+inlines them into the batch loops, and their array arguments are `noalias`: no two of them
+may overlap in memory while the helper runs (every caller passes distinct scratch and
+output arrays; `sim.evaluate` refuses overlapping outputs). Knowing that, LLVM vectorises
+their loops without run-time overlap checks, and inlined they pay no argument passing:
+together a quarter of the evaluation's time (docs/benchmarks.md, thirteenth session)."""
 _INLINE = {**_JIT, "inline": "always"}
 """For the small per-sample helpers called inside loops that must vectorise."""
 

@@ -37,3 +37,19 @@ def test_out_of_the_wrong_layout_is_refused_before_any_work():
     frozen.valid.flags.writeable = False
     with pytest.raises(ValueError, match="out valid must be a writable"):
         evaluate(genomes, "Fp", out=frozen)
+
+
+def test_out_arrays_that_overlap_are_refused_before_any_work():
+    genomes = random_genomes(np.random.default_rng(0), 4)
+    shared = Evaluation.empty(4, 40, 1)
+    twins = Evaluation(**{**vars(shared), "foot_y": shared.foot_x})
+    twins.foot_x[:] = 7.0
+    with pytest.raises(ValueError, match=r"out foot_(x|y) overlaps out foot_(x|y) in memory"):
+        evaluate(genomes, "Fp", out=twins)
+    assert np.all(twins.foot_x == 7.0)  # refused before the kernel wrote anything
+    # A result array whose first row lies over the genomes' last genes.
+    flat = np.zeros(4 * 56 + 4 * 40)
+    flat[: 4 * 56] = genomes.reshape(-1)
+    over = Evaluation(**{**vars(shared), "foot_x": flat[4 * 56 - 8 : 4 * 56 + 152].reshape(4, 40)})
+    with pytest.raises(ValueError, match="out foot_x overlaps genomes in memory"):
+        evaluate(flat[: 4 * 56].reshape(4, 56), "Fp", out=over)
