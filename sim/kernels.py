@@ -49,7 +49,12 @@ def noalias_option() -> dict[str, bool]:
     """
     from numba.core import compiler, cpu, options
 
-    if not (hasattr(compiler.Flags, "noalias") and hasattr(options.TargetOptions, "Mapping")):
+    needed = (
+        (compiler.Flags, "noalias"),
+        (options.TargetOptions, "Mapping"),
+        (cpu, "CPUTargetOptions"),
+    )
+    if not all(hasattr(owner, name) for owner, name in needed):
         return {}
     cpu.CPUTargetOptions._noalias = options.TargetOptions.Mapping("noalias")
     return {"_noalias": True}

@@ -165,3 +165,13 @@ def test_angle_error_when_the_foot_beam_angles_cancel_exactly(mode):
         assert ref.angle_error[0] == upward.sum() == 6
     kernel = sim.evaluate(genome, "Fp", mode)
     assert_evaluations_equal(kernel, ref, genome)
+
+
+def test_helpers_compile_inlined_with_noalias_arrays():
+    """The build docs/benchmarks.md measures: a numba without the `noalias` flag would fall
+    back, silently, to the slower build (equal outputs), and this would say so."""
+    from sim import kernels
+
+    assert kernels.noalias_option() == {"_noalias": True}
+    assert kernels._JIT["_noalias"] and kernels._JIT["forceinline"]
+    assert kernels.place_triangle.targetoptions["_noalias"]
