@@ -461,8 +461,9 @@ def simulate_one(ni, nf, bi, cos_t, sin_t, legacy, xs, ys, ux, uy, valid):
 def recorded_angle(b, k, bi, xs, ys, theta):
     """Returns beam b's recorded angle at sample k (docs/simulator.md, "Beam angle").
 
-    The crank's is theta[k]; a triangle beam's is atan2 of its end minus its start; an
-    extension's is its root beam's plus pi for each inverted link, added one at a time.
+    The crank's is theta[k]; a triangle beam's is atan2 of its end minus its start, moved
+    into [0, 2 pi) by adding 2 pi where negative (spec §2, the published code's addition);
+    an extension's is its root beam's plus pi for each inverted link, added one at a time.
     """
     root = bi[b, 4]
     if bi[root, 2] == B_CRANK:
@@ -471,6 +472,8 @@ def recorded_angle(b, k, bi, xs, ys, theta):
         s = bi[root, 0]
         e = bi[root, 1]
         angle = math.atan2(ys[e, k] - ys[s, k], xs[e, k] - xs[s, k])
+        if angle < 0.0:
+            angle += 2.0 * math.pi
     for _ in range(bi[b, 5]):
         angle += math.pi
     return angle
@@ -480,20 +483,21 @@ def recorded_angle(b, k, bi, xs, ys, theta):
 def triangle_up(dxa, dya, dxc, dyc):
     """Returns 1 or 0 when signs alone settle whether a triangle foot points up, else -1.
 
-    (dxa, dya) and (dxc, dyc) are the foot minus anchors A and C. The mean of the two
-    atan2 angles lies in (0, pi) exactly when their sum lies in (0, 2 pi). Both down:
-    both angles are negative. Both clearly up: both lie strictly inside (0, pi) (a margin
-    keeps clear of atan2 rounding to pi). One up, one down: the sum is positive exactly
-    when the up beam turns further from +x than the mirrored down beam, a cross product;
-    within rounding of zero the angles themselves must decide (two atan2 values can cancel
-    exactly where the cross product is a few ulps off). Written as selects.
+    (dxa, dya) and (dxc, dyc) are the foot minus anchors A and C. The recorded angles lie
+    in [0, 2 pi), and their mean lies in (0, pi) exactly when their sum lies in (0, 2 pi).
+    Both down: both angles exceed pi. Both clearly up: both lie strictly inside (0, pi) (a
+    margin keeps clear of atan2 rounding to pi). One up (u in (0, pi)), one down (2 pi + v,
+    v in (-pi, 0)): the sum is below 2 pi exactly when u + v < 0, whose sign is that of
+    sin(u + v), a cross product; within rounding of zero the angles themselves must decide
+    (two atan2 values can cancel exactly where the cross product is a few ulps off).
+    Written as selects.
     """
     down = (dya < 0.0) & (dyc < 0.0)
     up = (dya > 1e-9 * abs(dxa)) & (dyc > 1e-9 * abs(dxc))
     mixed = ((dya > 0.0) & (dyc < 0.0)) | ((dya < 0.0) & (dyc > 0.0))
     cross = dxa * dyc + dxc * dya
     settled = mixed & (abs(cross) > 1e-9 * (abs(dxa * dyc) + abs(dxc * dya)))
-    by_cross = (1 if cross > 0.0 else 0) if settled else -1
+    by_cross = (1 if cross < 0.0 else 0) if settled else -1
     return 0 if down else (1 if up else by_cross)
 
 
@@ -518,23 +522,21 @@ def up_by_sign(foot, ni, bi, b, xs, ys, theta, codes):
                 ys[foot, k] - ys[c, k],
             )
         return
-    # One beam: its angle is its root's plus m times pi, the root's lying in [-pi, pi]
-    # (a triangle beam) or [0, 2 pi) (the crank); with m >= 2 it is at least pi.
+    # One beam: its angle is its root's plus m times pi, the root's lying in [0, 2 pi)
+    # (a triangle beam or the crank); with m >= 1 it is at least pi.
     root = bi[b, 4]
-    m = bi[b, 5]
-    if m >= 2:
+    if bi[b, 5] >= 1:
         codes[:] = 0
     elif bi[root, 2] == B_CRANK:
         for k in range(n):
-            codes[k] = 1 if m == 0 and 0.0 < theta[k] < math.pi else 0
+            codes[k] = 1 if 0.0 < theta[k] < math.pi else 0
     else:
         s = bi[root, 0]
         e = bi[root, 1]
         for k in range(n):
             dx = xs[e, k] - xs[s, k]
             dy = ys[e, k] - ys[s, k]
-            rise = dy if m == 0 else -dy
-            codes[k] = 1 if rise > 1e-9 * abs(dx) else (0 if rise <= 0.0 else -1)
+            codes[k] = 1 if dy > 1e-9 * abs(dx) else (0 if dy <= 0.0 else -1)
 
 
 @numba.njit(**_JIT)

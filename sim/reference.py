@@ -208,8 +208,15 @@ def unit_vector(start: Point, end: Point) -> Point:
 
 
 def beam_angle(start: Point, end: Point) -> float:
-    """Returns the angle of the beam start -> end, in (-pi, pi]."""
-    return math.atan2(end[1] - start[1], end[0] - start[0])
+    """Returns the angle of the beam start -> end, in [0, 2 pi) (spec §2, "Triangle").
+
+    atan2's (-pi, pi] is moved up by 2 pi where negative, the published code's very
+    addition, so the bits match it.
+    """
+    angle = math.atan2(end[1] - start[1], end[0] - start[0])
+    if angle < 0.0:
+        angle += 2.0 * math.pi
+    return angle
 
 
 @dataclass

@@ -156,6 +156,17 @@ def mutated_set() -> np.ndarray:
 
 
 @pytest.fixture(scope="session")
+def large_set() -> np.ndarray:
+    """10,000 uniform random genomes, then 10,000 heavily mutated ones."""
+    return np.concatenate(
+        [
+            np.random.default_rng(24).random((10_000, N_GENES)),
+            heavily_mutated(np.random.default_rng(2024), 10_000),
+        ]
+    )
+
+
+@pytest.fixture(scope="session")
 def edge_set() -> np.ndarray:
     """600 genomes (600, 56) made only of bin-edge values and values in [0, 1e-3)."""
     rng = np.random.default_rng(7)
