@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from algorithms.aurora_kernel import epoch_workspace, train_epoch
+
 HIDDEN_SIZES: tuple[int, ...] = (64, 48, 32, 16, 4, 16, 32, 48, 64)
 """Units of the hidden layers; the 4-unit layer is the sigmoid bottleneck."""
 BOTTLENECK = 1 + HIDDEN_SIZES.index(4)
@@ -21,6 +23,9 @@ INITIAL_ACCUMULATOR = 0.1
 """Adagrad's starting sum of squared gradients (Keras's default, as published)."""
 EPSILON = 1e-7
 """Adagrad's denominator guard (Keras's default)."""
+LOOPS: tuple[str, ...] = ("auto", "compiled", "torch")
+"""Training loops: "compiled" (`aurora_kernel`, CPU only), "torch" (tensor operations, any
+device); "auto" takes the compiled loop on the CPU and torch elsewhere."""
 
 
 def layer_sizes(n_inputs: int) -> tuple[int, ...]:
@@ -62,30 +67,42 @@ class TrainingResult:
 
 
 class PathAutoencoder:
-    """The 80-64-48-32-16-4-16-32-48-64-80 autoencoder, trained with a hand-fused loop.
+    """The 80-64-48-32-16-4-16-32-48-64-80 autoencoder, trained by a hand-written loop.
 
     Hidden layers are linear and the bottleneck is a sigmoid, as in the authors'
     published Keras model; weights start Glorot-uniform and biases at zero (Keras
-    defaults). All parameters live in one flat float32 vector so that an Adagrad step is
-    four tensor operations; the backward pass is written out by hand (no autograd), which
-    removes most of the per-step Python overhead of `torch.nn` + `torch.optim` while
-    computing the same gradients (tests hold the two equal).
+    defaults). All parameters live in one flat float32 vector; the backward pass is
+    written out by hand (no autograd). On the CPU a whole epoch runs in one compiled call
+    (`algorithms.aurora_kernel`); on a GPU an Adagrad step is a few tensor operations.
+    Both compute the gradients of `torch.nn` + `torch.optim` (tests hold them equal).
 
     Args:
         n_inputs: input and output width, 2A for A crank angles (80 in the study).
         seed: seeds the weight initialisation.
         device: a torch device string ("cpu", "cuda", ...).
-        threads: torch CPU threads while training and encoding; results are reproducible
-            for a fixed count.
+        threads: torch CPU threads while encoding and in the torch loop; results are
+            reproducible for a fixed count (the compiled loop is single-threaded).
+        loop: one of `LOOPS`.
     """
 
     def __init__(
-        self, *, n_inputs: int = 80, seed: int, device: str = "cpu", threads: int = 1
+        self,
+        *,
+        n_inputs: int = 80,
+        seed: int,
+        device: str = "cpu",
+        threads: int = 1,
+        loop: str = "auto",
     ) -> None:
         if n_inputs < 2 or threads < 1:
             raise ValueError(f"need n_inputs >= 2 and threads >= 1, got {n_inputs} and {threads}")
+        if loop not in LOOPS:
+            raise ValueError(f"unknown training loop {loop!r}; allowed: {', '.join(LOOPS)}")
+        if loop == "compiled" and torch.device(device).type != "cpu":
+            raise ValueError(f"the compiled loop runs on the CPU only, got device {device!r}")
         self._threads = threads
         self._device = torch.device(device)
+        self._compiled = loop == "compiled" or (loop == "auto" and self._device.type == "cpu")
         self._sizes = layer_sizes(n_inputs)
         self._layout: list[tuple[int, int, int, int]] = []
         offset = 0
@@ -222,20 +239,44 @@ class PathAutoencoder:
                 f"{batch_size}, {learning_rate}"
             )
         initial = self.loss(x)
-        data = torch.as_tensor(x, dtype=torch.float32).to(self._device)
-        n = data.shape[0]
+        n = x.shape[0]
         generator = torch.Generator().manual_seed(int(seed))
-        with torch_threads(self._threads):
-            for _ in range(epochs):
-                order = torch.randperm(n, generator=generator).to(self._device)
-                for start in range(0, n, batch_size):
-                    self._step(data[order[start : start + batch_size]], learning_rate)
+        if self._compiled:
+            self._train_compiled(x, epochs, batch_size, learning_rate, generator)
+        else:
+            data = torch.as_tensor(x, dtype=torch.float32).to(self._device)
+            with torch_threads(self._threads):
+                for _ in range(epochs):
+                    order = torch.randperm(n, generator=generator).to(self._device)
+                    for start in range(0, n, batch_size):
+                        self._step(data[order[start : start + batch_size]], learning_rate)
         return TrainingResult(
             initial_loss=initial,
             final_loss=self.loss(x),
             n_samples=n,
             n_steps=epochs * -(-n // batch_size),
         )
+
+    def _train_compiled(
+        self,
+        x: np.ndarray,
+        epochs: int,
+        batch_size: int,
+        learning_rate: float,
+        generator: torch.Generator,
+    ) -> None:
+        """Runs `epochs` compiled epochs on x (N, 80), in torch's batch order."""
+        theta = self._theta.numpy()  # CPU tensors share their memory with these views
+        accumulator = self._accumulator.numpy()
+        data = np.ascontiguousarray(x, dtype=np.float32)
+        sizes = np.array(self._sizes, dtype=np.int64)
+        work = epoch_workspace(self._sizes, batch_size)
+        lr, eps = np.float32(learning_rate), np.float32(EPSILON)
+        for _ in range(epochs):
+            order = torch.randperm(data.shape[0], generator=generator).numpy()
+            train_epoch(
+                theta, accumulator, data, order, batch_size, lr, eps, sizes, BOTTLENECK, *work
+            )
 
     def state_dict(self) -> dict[str, torch.Tensor]:
         """Returns the weights, biases and Adagrad sums as named CPU tensors.

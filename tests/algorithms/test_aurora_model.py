@@ -1,4 +1,4 @@
-"""Tests of the AURORA path autoencoder, its fused training loop and its path inputs."""
+"""Tests of the AURORA path autoencoder, its training loops and its path inputs."""
 
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ from algorithms.aurora_reference import reference_module, train_reference
 N_ANGLES = 40
 
 
-def path_family(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Returns n synthetic foot paths (n, 40) x2: ellipses and 'D' shapes of varied size,
+def path_family(n: int, seed: int, n_angles: int = N_ANGLES) -> tuple[np.ndarray, np.ndarray]:
+    """Returns n synthetic foot paths (n, A) x2: ellipses and 'D' shapes of varied size,
     position and phase, the kind of closed curves a crank-driven foot traces."""
     rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, 2 * np.pi, N_ANGLES, endpoint=False)[None, :] + rng.uniform(
+    t = np.linspace(0.0, 2 * np.pi, n_angles, endpoint=False)[None, :] + rng.uniform(
         0, 2 * np.pi, (n, 1)
     )
     width, height = rng.uniform(3, 20, (n, 1)), rng.uniform(1, 8, (n, 1))
@@ -55,12 +55,17 @@ def test_encodings_lie_in_the_unit_hypercube() -> None:
     assert codes[-50:].std(axis=0).max() > 0.0
 
 
-def test_fused_loop_matches_plain_autograd_training() -> None:
-    x = prepare_paths(*path_family(100, seed=6), "centred")
-    fused = PathAutoencoder(seed=7)
+@pytest.mark.parametrize(
+    ("loop", "n_angles", "batch_size"),
+    [("compiled", 40, 32), ("compiled", 39, 20), ("compiled", 40, 7), ("torch", 40, 32)],
+)
+def test_hand_written_loops_match_plain_autograd_training(loop, n_angles, batch_size) -> None:
+    """Both loops, with widths and batches that leave remainder rows and padded lanes."""
+    x = prepare_paths(*path_family(100, seed=6, n_angles=n_angles), "centred")
+    fused = PathAutoencoder(n_inputs=2 * n_angles, seed=7, loop=loop)
     plain = reference_module(fused.state_dict())
-    fused.train(x, epochs=4, batch_size=32, learning_rate=0.01, seed=8)
-    train_reference(plain, x, epochs=4, batch_size=32, learning_rate=0.01, seed=8)
+    fused.train(x, epochs=4, batch_size=batch_size, learning_rate=0.01, seed=8)
+    train_reference(plain, x, epochs=4, batch_size=batch_size, learning_rate=0.01, seed=8)
     trained = reference_module(fused.state_dict())
     for mine, theirs in zip(trained.parameters(), plain.parameters(), strict=True):
         torch.testing.assert_close(mine, theirs, atol=1e-5, rtol=1e-4)
