@@ -2,7 +2,14 @@
 
 from algorithms.archive import GridArchive, elite_rows
 from algorithms.ea import EvolutionaryAlgorithm
-from algorithms.factory import APPROACHES, eval_fitness, make_optimizer
+from algorithms.factory import (
+    APPROACHES,
+    MAP_ELITES,
+    REPERTOIRE_APPROACHES,
+    STUDY_APPROACHES,
+    eval_fitness,
+    make_optimizer,
+)
 from algorithms.individuals import Individuals
 from algorithms.map_elites import MapElites
 from algorithms.mutation import bounce_back, initial_sigma, mutate
@@ -10,14 +17,18 @@ from algorithms.nsga2 import NSGA2
 from algorithms.optimizer import BaseOptimizer, Optimizer
 from algorithms.pareto import crowding_distance, hypervolume_2d, non_dominated_ranks, select_nsga2
 from algorithms.population import PopulationOptimizer
+from algorithms.random_sampling import RandomSampling
 from algorithms.scoring import HV_REFERENCES, QD_OFFSETS, TWO_OBJECTIVE, scalar_loss
 from algorithms.selection import tournament
 
 __all__ = [
     "APPROACHES",
     "HV_REFERENCES",
+    "MAP_ELITES",
     "NSGA2",
     "QD_OFFSETS",
+    "REPERTOIRE_APPROACHES",
+    "STUDY_APPROACHES",
     "TWO_OBJECTIVE",
     "BaseOptimizer",
     "EvolutionaryAlgorithm",
@@ -26,6 +37,7 @@ __all__ = [
     "MapElites",
     "Optimizer",
     "PopulationOptimizer",
+    "RandomSampling",
     "bounce_back",
     "crowding_distance",
     "elite_rows",

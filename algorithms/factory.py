@@ -6,13 +6,21 @@ from algorithms.ea import EvolutionaryAlgorithm
 from algorithms.map_elites import MapElites
 from algorithms.nsga2 import NSGA2
 from algorithms.optimizer import Optimizer
+from algorithms.random_sampling import RandomSampling
 from algorithms.scoring import TWO_OBJECTIVE
 
-APPROACHES: tuple[str, ...] = ("EA", "NSGA2", "MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
-"""Every approach `make_optimizer` builds."""
+MAP_ELITES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
+"""The MAP-Elites approaches of the study (each with its own descriptor grid)."""
+STUDY_APPROACHES: tuple[str, ...] = ("EA", "NSGA2", *MAP_ELITES)
+"""The study's six approaches."""
+APPROACHES: tuple[str, ...] = (*STUDY_APPROACHES, "RANDOM")
+"""Every approach `make_optimizer` builds: the study's six and the RANDOM baseline."""
+REPERTOIRE_APPROACHES: tuple[str, ...] = (*MAP_ELITES, "RANDOM")
+"""Approaches that keep a repertoire (an archive on a grid) rather than a population."""
 _OPTIONS: dict[str, tuple[str, ...]] = {
     "EA": ("coverage_space", "initial_sigma"),
     "NSGA2": ("coverage_space", "initial_sigma"),
+    "RANDOM": ("coverage_space", "initial_sigma"),
     "MAP-WH": ("initial_sigma",),
     "MAP-LIS": ("initial_sigma",),
     "MAP-ST": ("initial_sigma",),
@@ -45,7 +53,8 @@ def make_optimizer(
         seed: seed of the optimizer's random stream.
         n_angles: crank angles per evaluation.
         **options: approach-specific settings: `initial_sigma` (all but MAP-AU),
-            `coverage_space` (EA, NSGA2); MAP-AU passes all of them to `AuroraMapElites`.
+            `coverage_space` (EA, NSGA2, RANDOM); MAP-AU passes all of them to
+            `AuroraMapElites`.
 
     Raises:
         ValueError: naming an unknown approach or option, or a bad setting.
@@ -73,4 +82,6 @@ def make_optimizer(
         return EvolutionaryAlgorithm(**common, **options)
     if approach == "NSGA2":
         return NSGA2(**common, **options)
+    if approach == "RANDOM":
+        return RandomSampling(**common, **options)
     return MapElites(approach=approach, **common, **options)

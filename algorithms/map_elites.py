@@ -75,7 +75,6 @@ class MapElites(BaseOptimizer):
         if loss.size == 0:
             loss = np.full(1, np.nan)
         return {
-            "best_loss": float(np.min(loss)),
             "mean_loss": float(np.mean(loss)),
             "coverage": self._archive.coverage(),
             "qd_score": self._archive.qd_score(self.qd_offset),

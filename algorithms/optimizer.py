@@ -51,7 +51,7 @@ class Optimizer(Protocol):
         ...
 
     def best(self) -> tuple[np.ndarray, float]:
-        """Returns the best genome (56,) kept and its single-objective loss."""
+        """Returns the best genome (56,) ever told and its single-objective loss."""
         ...
 
     def view(self) -> dict[str, np.ndarray]:
@@ -77,6 +77,10 @@ class BaseOptimizer:
     Subclasses choose parents (`_parents`), keep survivors (`_survive`), report
     (`_summary`, `_columns`) and add their own state (`_state`, `_load_state`).
 
+    Every approach keeps its best-ever individual (the lowest single-objective loss told
+    so far, the first on ties), whether or not its survivors still hold it (the EA's do
+    not): `best()` and the `best_loss` metric are that individual's.
+
     Args:
         fitness: "Fp" or "Fsl", the loss the study optimises.
         batch_size: genomes per ask (B); also the initial population.
@@ -88,6 +92,8 @@ class BaseOptimizer:
 
     approach: str = ""
     multi_objective: bool = False
+    random_batches: bool = False
+    """Every batch is uniform random genomes (RANDOM), not only the first."""
 
     def __init__(
         self,
@@ -121,6 +127,7 @@ class BaseOptimizer:
         self._evaluations = 0
         self._iteration = 0
         self._pending: tuple[np.ndarray, np.ndarray] | None = None
+        self._best: Individuals | None = None
 
     @property
     def eval_fitness(self) -> str:
@@ -141,7 +148,7 @@ class BaseOptimizer:
         """Returns the next batch, (B, 56): random genomes first, then mutated parents."""
         if self._pending is not None:
             raise RuntimeError("ask() called twice without tell(); tell the last batch first")
-        if self._iteration == 0:
+        if self._iteration == 0 or self.random_batches:
             genomes = random_genomes(self._rng, self.batch_size)
             sigma = initial_sigma(self._rng, self.batch_size, self.mode, self.initial_sigma)
         else:
@@ -178,6 +185,7 @@ class BaseOptimizer:
             foot_x=np.asarray(evaluation.foot_x, dtype=np.float64),
             foot_y=np.asarray(evaluation.foot_y, dtype=np.float64),
         )
+        self._keep_best(batch)
         self._survive(batch, initial=self._iteration == 0)
         self._evaluations += len(batch)
         self._iteration += 1
@@ -188,21 +196,31 @@ class BaseOptimizer:
         raise NotImplementedError
 
     def metrics(self) -> dict[str, float]:
-        """Returns iteration, evaluations, best_loss, mean_loss, coverage, qd_score, ...."""
+        """Returns iteration, evaluations, best_loss (best-ever), mean_loss (of the kept
+        individuals), coverage, qd_score, ...."""
+        best = np.nan if self._best is None else float(self._scalar(self._best)[0])
         return {
             "iteration": float(self._iteration),
             "evaluations": float(self._evaluations),
+            "best_loss": best,
             **self._summary(),
         }
 
     def best(self) -> tuple[np.ndarray, float]:
-        """Returns the kept genome (56,) with the lowest single-objective loss, and that loss."""
-        kept = self._kept()
-        if kept is None:
-            raise RuntimeError("nothing kept yet: tell() the first batch")
-        loss = self._scalar(kept)
-        i = int(np.argmin(loss))
-        return kept.genome[i].copy(), float(loss[i])
+        """Returns the best-ever genome (56,) and its single-objective loss."""
+        if self._best is None:
+            raise RuntimeError("nothing told yet: tell() the first batch")
+        return self._best.genome[0].copy(), float(self._scalar(self._best)[0])
+
+    def best_individual(self) -> Individuals | None:
+        """Returns the best-ever individual (one row), None before the first tell."""
+        return self._best
+
+    def _keep_best(self, batch: Individuals) -> None:
+        loss = self._scalar(batch)
+        i = int(np.argmin(np.where(np.isnan(loss), np.inf, loss)))
+        if self._best is None or loss[i] < self._scalar(self._best)[0]:
+            self._best = batch.take(slice(i, i + 1))
 
     def view(self) -> dict[str, np.ndarray]:
         """Returns the kept individuals as columns.
@@ -255,6 +273,7 @@ class BaseOptimizer:
             "optimizer.rng": encode_rng(self._rng),
             "optimizer.evaluations": np.array(self._evaluations, dtype=np.int64),
             "optimizer.iteration": np.array(self._iteration, dtype=np.int64),
+            **({} if self._best is None else self._best.to_state("best")),
             **self._state(),
         }
 
@@ -273,6 +292,7 @@ class BaseOptimizer:
         self._iteration = int(state["optimizer.iteration"])
         self._pending = None
         self._load_state(state)
+        self._best = Individuals.from_state(state, "best") if "best.genome" in state else None
 
     def _scalar(self, kept: Individuals) -> np.ndarray:
         return scalar_loss(kept.loss, kept.error, kept.angle_error, self.fitness)

@@ -7,7 +7,7 @@ import numpy as np
 from algorithms.archive import elite_rows
 from algorithms.individuals import Individuals
 from algorithms.optimizer import BaseOptimizer
-from sim.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
+from sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES, bin_descriptors, cell_index
 from sim.evaluation import Evaluation
 
 
@@ -27,10 +27,9 @@ class PopulationOptimizer(BaseOptimizer):
 
     def __init__(self, *, coverage_space: str = "MAP-LIS", **kwargs: object) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
-        allowed = ("MAP-WH", "MAP-LIS", "MAP-ST")
-        if coverage_space not in allowed:
+        if coverage_space not in COVERAGE_SPACES:
             raise ValueError(
-                f"unknown coverage_space {coverage_space!r}; allowed: {', '.join(allowed)}"
+                f"unknown coverage_space {coverage_space!r}; allowed: {', '.join(COVERAGE_SPACES)}"
             )
         self.coverage_space = coverage_space
         self._population: Individuals | None = None
@@ -54,13 +53,12 @@ class PopulationOptimizer(BaseOptimizer):
     def _summary(self) -> dict[str, float]:
         pop = self._population
         if pop is None:
-            return {"best_loss": np.nan, "mean_loss": np.nan, "coverage": 0.0, "qd_score": 0.0}
+            return {"mean_loss": np.nan, "coverage": 0.0, "qd_score": 0.0}
         loss = self._scalar(pop)
         space = DESCRIPTOR_SPACES[self.coverage_space]
         cells = cell_index(bin_descriptors(pop.desc, space), space)
         best = loss[elite_rows(cells, loss)]
         return {
-            "best_loss": float(np.min(loss)),
             "mean_loss": float(np.mean(loss)),
             "coverage": best.size / space.n_cells,
             "qd_score": float(np.sum(np.maximum(self.qd_offset - best, 0.0))),

@@ -46,6 +46,9 @@ DESCRIPTOR_SPACES: dict[str, DescriptorSpace] = {
     "MAP-AU": DescriptorSpace(("z0", "z1", "z2", "z3"), 10, (0.1, 0.1, 0.1, 0.1)),
 }
 """Every MAP-Elites approach's space; MAP-AU's values come from the AURORA encoder."""
+COVERAGE_SPACES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST")
+"""The published grids whose descriptors `sim.evaluate` computes: the ones on which an
+approach without its own grid (EA, NSGA-II, RANDOM) is measured."""
 
 
 def bin_descriptors(values: np.ndarray, space: DescriptorSpace) -> np.ndarray:

@@ -7,7 +7,14 @@ import io
 import numpy as np
 import pytest
 
-from algorithms import APPROACHES, MapElites, make_optimizer, scalar_loss
+from algorithms import (
+    APPROACHES,
+    REPERTOIRE_APPROACHES,
+    MapElites,
+    make_optimizer,
+    scalar_loss,
+)
+from sim.descriptors import DESCRIPTOR_SPACES
 from sim.evaluate import evaluate
 from sim.evaluation import Evaluation
 from sim.genome import N_GENES
@@ -183,13 +190,47 @@ def test_view_columns(approach: str) -> None:
     assert view["sigma"].shape == (n, 1)
     assert view["foot_x"].shape == view["foot_y"].shape == (n, N_ANGLES)
     assert view["cell"].dtype == np.int64
-    dims = {"EA": 2, "NSGA2": 2, "MAP-WH": 2, "MAP-LIS": 2, "MAP-ST": 4}[approach]
+    dims = {"EA": 2, "NSGA2": 2, "MAP-WH": 2, "MAP-LIS": 2, "MAP-ST": 4, "RANDOM": 2}[approach]
     assert [k for k in view if k.startswith("desc_")] == [f"desc_{d}" for d in range(dims)]
-    is_map = approach.startswith("MAP-")
-    assert (view["cell"] >= 0).all() == is_map
-    assert ("bin_0" in view) == is_map
+    has_grid = approach in REPERTOIRE_APPROACHES
+    assert (view["cell"] >= 0).all() == has_grid
+    assert ("bin_0" in view) == has_grid
     assert ("loss_0" in view) == (approach == "NSGA2")
-    assert view["loss"].min() == pytest.approx(opt.best()[1])
+    if approach == "EA":  # not elitist: the best-ever may have left the population
+        assert view["loss"].min() >= opt.best()[1]
+    else:
+        assert view["loss"].min() == pytest.approx(opt.best()[1])
+
+
+@pytest.mark.parametrize("approach", BUILT_IN)
+def test_best_is_the_best_ever_told_and_survives_a_resume(approach: str) -> None:
+    opt = make(approach)
+    told = []
+    for _ in range(4):
+        genomes = opt.ask()
+        evaluation = evaluate(genomes, opt.eval_fitness, "paper", n_angles=N_ANGLES)
+        opt.tell(genomes, evaluation)
+        loss = scalar_loss(
+            np.asarray(evaluation.loss), evaluation.error, evaluation.angle_error, opt.fitness
+        )
+        told.append((loss.min(), genomes[np.argmin(loss)]))
+    best_loss, best_genome = min(told, key=lambda t: t[0])
+    genome, loss = opt.best()
+    assert loss == best_loss == opt.metrics()["best_loss"]
+    np.testing.assert_array_equal(genome, best_genome)
+    again = make(approach)
+    again.load_state_dict(opt.state_dict())
+    assert again.best()[1] == loss
+
+
+def test_random_asks_fresh_uniform_genomes_and_keeps_them_on_the_map_lis_grid() -> None:
+    opt = make("RANDOM")
+    run(opt, 2)
+    first = opt.archive.elites.genome.copy()
+    genomes = opt.ask()
+    assert not np.isin(genomes, first).any()
+    assert opt.archive.space == DESCRIPTOR_SPACES["MAP-LIS"]
+    assert opt.settings()["coverage_space"] == "MAP-LIS"
 
 
 def test_factory_rejects_unknown_names() -> None:
