@@ -29,13 +29,13 @@ import numpy as np
 from deap import base, creator, tools
 
 from algorithms import GridArchive, Individuals, select_nsga2
+from orchestrator.config import STUDY_EVALUATIONS
 from sim import DESCRIPTOR_SPACES, evaluate, random_genomes
 from sim.reference import evaluate_reference
 from workers.evaluators import LocalEvaluator
 from workers.recorders import NullRecorder
 from workers.trial import TrialSpec, run_trial
 
-STUDY_EVALUATIONS = 726_750
 BATCH = 5000
 SMALL_BATCH = 1000
 REFERENCE_GENOMES = 100

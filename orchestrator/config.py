@@ -8,11 +8,16 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from algorithms.factory import APPROACHES
+from algorithms.factory import APPROACHES, STUDY_APPROACHES
 from algorithms.optimizer import SINGLE_FITNESSES
 from orchestrator.cli import CliError
 from sim.evaluation import MODES
 
+STUDY_EVALUATIONS = 726_750
+"""Evaluations per trial in the study (one hour on 16 CPUs, spec §6); whole batches of
+5,000 make it 725,000."""
+STUDY_TRIALS = 10
+"""Trials per approach and fitness in the study."""
 TARGETS: tuple[str, ...] = ("D16", "D24")
 """The named F_p targets a grid may use."""
 EXECUTION_KEYS: frozenset[str] = frozenset(
@@ -41,7 +46,8 @@ class GridConfig:
 
     Attributes:
         trials: trials per (approach, fitness) cell, >= 1.
-        approaches: search approaches, a subset of `APPROACHES`.
+        approaches: search approaches, a subset of `APPROACHES` (default: the study's six,
+            without the RANDOM baseline).
         fitnesses: fitness functions the trials optimise, a subset of ("Fp", "Fsl").
         evaluations: evaluation budget per trial, >= 1.
         batch_size: children per iteration (and the initial population), >= 1.
@@ -52,10 +58,13 @@ class GridConfig:
         max_seconds: optional wall-clock budget per trial (seconds, > 0).
         options: per-approach option tables (`options["MAP-AU"] = {...}`) passed to that
             approach's optimizer (`algorithms.make_optimizer`).
-        evaluators_per_trial: evaluator actors per trial (K), >= 1.
+        evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
+            trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
-        trial_cpus: CPUs reserved by the trial task itself, >= 0; 0 lets it share the first
-            evaluator's reservation (the trial loop and its evaluators take turns).
+        trial_cpus: CPUs reserved by the trial task itself: a number >= 0, or "auto"
+            (the default): with K = 0 the cluster's CPUs shared out among the trials
+            (`orchestrator.reservation`), with actors 0 (the trial loop shares the first
+            evaluator's reservation; the two take turns).
         checkpoint_every: iterations between checkpoints, >= 1.
         max_concurrent_trials: trials in flight at once; 0 = as many as the cluster fits.
         max_retries: Ray retries of a trial after a node or worker failure, >= 0.
@@ -64,10 +73,10 @@ class GridConfig:
         work_dir: folder for trial checkpoints; "" = next to the embedded store.
     """
 
-    trials: int = 10
-    approaches: tuple[str, ...] = APPROACHES
+    trials: int = STUDY_TRIALS
+    approaches: tuple[str, ...] = STUDY_APPROACHES
     fitnesses: tuple[str, ...] = ("Fp", "Fsl")
-    evaluations: int = 725_000
+    evaluations: int = STUDY_EVALUATIONS
     batch_size: int = 5000
     mode: str = "paper"
     seed: int = 0
@@ -75,9 +84,9 @@ class GridConfig:
     n_angles: int = 40
     max_seconds: float | None = None
     options: dict[str, Any] = field(default_factory=dict)
-    evaluators_per_trial: int = 1
+    evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
-    trial_cpus: float = 0.0
+    trial_cpus: float | str = "auto"
     checkpoint_every: int = 10
     max_concurrent_trials: int = 0
     max_retries: int = 3
@@ -101,10 +110,6 @@ class GridConfig:
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes)."""
         return {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS}
-
-    def per_trial_cpus(self) -> float:
-        """Returns the CPUs one trial reserves: its own plus its evaluators'."""
-        return self.trial_cpus + self.evaluators_per_trial * self.cpus_per_evaluator
 
 
 KEYS: tuple[str, ...] = tuple(f.name for f in fields(GridConfig))
@@ -146,11 +151,16 @@ def _validate(cfg: GridConfig) -> None:
     for key in ("trials", "evaluations", "batch_size", "checkpoint_every"):
         _check_int(cfg, key, 1)
     _check_int(cfg, "n_angles", 3)
-    _check_int(cfg, "evaluators_per_trial", 1)
-    for key in ("seed", "max_concurrent_trials", "max_retries"):
+    for key in ("seed", "max_concurrent_trials", "max_retries", "evaluators_per_trial"):
         _check_int(cfg, key, 0)
     _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)
-    _check_number(cfg, "trial_cpus", 0.0, strict=False)
+    if cfg.trial_cpus != "auto":
+        try:
+            _check_number(cfg, "trial_cpus", 0.0, strict=cfg.evaluators_per_trial == 0)
+        except ConfigError:
+            bound = "> 0 (the task evaluates itself)" if cfg.evaluators_per_trial == 0 else ">= 0"
+            allowed = f'allowed: "auto" or a number {bound}'
+            raise _fail("trial_cpus", cfg.trial_cpus, allowed) from None
     if cfg.max_seconds is not None:
         _check_number(cfg, "max_seconds", 0.0, strict=True)
     _check_choices(cfg, "approaches", APPROACHES, many=True)

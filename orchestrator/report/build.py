@@ -3,18 +3,20 @@
 from __future__ import annotations
 
 import io
-import os
+import json
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
+from orchestrator.config import ConfigError, from_dict, to_toml
 from orchestrator.report import figures as fig
 from orchestrator.report.findings import Finding, check_findings
 from orchestrator.report.html import render_html
 from orchestrator.report.load import GridData, load_grid
 from orchestrator.report.stats import pairwise_tests, summary_table
+from workers.artifacts import write_bytes_atomic
 
 REPORT_ARTIFACT_DIR = "report"
 """Where the report lands among the grid parent run's artefacts."""
@@ -29,6 +31,8 @@ TRIAL_COLUMNS: tuple[str, ...] = (
     "status",
     "error",
     "best_loss",
+    "coverage",
+    "qd_score",
     "final_evaluations",
 )
 
@@ -58,17 +62,13 @@ class ReportResult:
     findings: tuple[Finding, ...]
 
 
-def write_atomic(path: Path, data: bytes) -> None:
-    """Writes `data` to `path` through a temporary file in the same folder."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+def config_toml(config: dict) -> str:
+    """Returns the grid's config as TOML (as `linkevo grid --dry-run` prints it), or as
+    JSON when it is not a loadable config (a grid from an older linkevo)."""
     try:
-        with os.fdopen(fd, "wb") as handle:
-            os.fchmod(handle.fileno(), 0o644)  # mkstemp makes 0600; reports are for sharing
-            handle.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        return to_toml(from_dict(config))
+    except (ConfigError, TypeError, ValueError):
+        return json.dumps(config, indent=1, sort_keys=True)
 
 
 def _render(figure, fmt: str) -> bytes:
@@ -115,7 +115,7 @@ def build_report(
         item.figure.set_layout_engine("none")
         for suffix, data in ((".png", png), (".pdf", _render(item.figure, "pdf"))):
             path = out / f"{item.name}{suffix}"
-            write_atomic(path, data)
+            write_bytes_atomic(path, data)
             files.append(path)
         embedded.append((item.title, item.caption, png))
     trials = grid.trials.reindex(columns=list(TRIAL_COLUMNS))
@@ -127,12 +127,14 @@ def build_report(
     }
     for name, table in tables.items():
         path = out / name
-        write_atomic(path, table.to_csv(index=False).encode())
+        write_bytes_atomic(path, table.to_csv(index=False).encode())
         files.append(path)
     page = render_html(
         grid_id=grid.grid_id,
         parent_run_id=grid.parent_run_id,
         tracking_uri=tracking_uri,
+        config=grid.config,
+        config_text=config_toml(grid.config),
         figures=embedded,
         summary=summary,
         tests=tests,
@@ -140,7 +142,7 @@ def build_report(
         findings=findings,
     )
     html_path = out / "report.html"
-    write_atomic(html_path, page.encode("utf-8"))
+    write_bytes_atomic(html_path, page.encode("utf-8"))
     files.append(html_path)
     if log_to_mlflow:
         from mlflow.tracking import MlflowClient

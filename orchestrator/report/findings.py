@@ -2,18 +2,24 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from orchestrator.report.figures import is_map_elites, is_pareto, label
-from orchestrator.report.load import GridData, read_archives
+from orchestrator.report.figures import label
+from orchestrator.report.load import BASELINE, GridData
 from orchestrator.report.stats import ALPHA
+from workers.repertoire_plots import is_map_elites, is_pareto
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
 NOT_TESTABLE = "not testable"
+HOLDS = "holds"
+DOES_NOT_HOLD = "does not hold"
+"""Verdicts of the checks that are linkevo's own, not the study's claims."""
 
 
 @dataclass(frozen=True)
@@ -74,18 +80,18 @@ def _map_versus(
 
 
 def best_path_sizes(grid: GridData) -> pd.DataFrame:
-    """Returns the size of each finished trial's best path (max of width and height).
+    """Returns the size of each finished trial's best-ever foot path (max of width and
+    height), read from its best-linkage document.
 
     Returns:
         Columns trial_key, approach, fitness, size.
     """
     trials = grid.finished()
-    trials = trials[trials.archive.notna()]
-    archives = read_archives(trials.archive, ["loss", "foot_x", "foot_y"])
     rows = []
-    for trial, archive in zip(trials.itertuples(), archives, strict=True):
-        best = archive.loc[archive.loss.idxmin()]
-        x, y = np.asarray(best.foot_x, dtype=float), np.asarray(best.foot_y, dtype=float)
+    for trial in trials[trials.best_linkage.notna()].itertuples():
+        path = json.loads(Path(trial.best_linkage).read_text())["foot_path"]
+        x = np.array([np.nan if v is None else v for v in path["x"]], dtype=float)
+        y = np.array([np.nan if v is None else v for v in path["y"]], dtype=float)
         if np.isfinite(x).any():
             size = max(np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y))
             rows.append((trial.trial_key, trial.approach, trial.fitness, float(size)))
@@ -102,9 +108,10 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
     approaches = grid.approaches()
     maps = [a for a in approaches if is_map_elites(a)]
     nsga = next((a for a in approaches if is_pareto(a)), "NSGA-II")
+    study = tests[tests.family == "study"]
     findings = []
 
-    verdict, evidence = _map_versus(tests, "Fp", maps, "EA", significant=True)
+    verdict, evidence = _map_versus(study, "Fp", maps, "EA", significant=True)
     findings.append(
         Finding(
             claim="With F_p, the MAP-Elites approaches beat the EA.",
@@ -116,7 +123,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
             evidence=evidence,
         )
     )
-    verdict, evidence = _map_versus(tests, "Fp", maps, nsga, significant=False)
+    verdict, evidence = _map_versus(study, "Fp", maps, nsga, significant=False)
     findings.append(
         Finding(
             claim="With F_p, the MAP-Elites approaches slightly beat NSGA-II.",
@@ -125,7 +132,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
             evidence=evidence,
         )
     )
-    fsl = tests[tests.fitness == "Fsl"]
+    fsl = study[study.fitness == "Fsl"]
     if fsl.empty:
         verdict, evidence = NOT_TESTABLE, "fewer than two approaches finished with Fsl"
     else:
@@ -144,16 +151,64 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         )
     )
     findings.append(_oversized(grid))
+    if BASELINE in approaches:
+        findings += _against_random(grid, tests, [a for a in approaches if a != BASELINE])
     return findings
+
+
+def _against_random(grid: GridData, tests: pd.DataFrame, searches: list[str]) -> list[Finding]:
+    """Returns the baseline checks: every search beats RANDOM on best loss, per fitness,
+    and MAP-LIS covers the MAP-LIS grid better than RANDOM does (the one MAP-Elites grid
+    RANDOM's archive shares)."""
+    baseline = tests[tests.family == "baseline"]
+    out = []
+    for fitness in grid.fitnesses():
+        rows = [_pair(baseline, fitness, a, BASELINE) for a in searches]
+        rows = [r for r in rows if r is not None]
+        claim = f"With {label(fitness)}, every search beats random sampling (not in the study)."
+        rule = (
+            "every approach has a lower median best loss than RANDOM at the same budget and a "
+            f"Holm-corrected Mann–Whitney p < {ALPHA} (baseline family)"
+        )
+        if not rows:
+            out.append(Finding(claim, rule, NOT_TESTABLE, f"no finished pairs with {fitness}"))
+            continue
+        wins = [r.median_a < r.median_b and bool(r.p_holm < ALPHA) for r in rows]
+        verdict = HOLDS if all(wins) else DOES_NOT_HOLD
+        out.append(Finding(claim, rule, verdict, "; ".join(_describe(r) for r in rows)))
+    done = grid.finished()
+    for fitness in grid.fitnesses():
+        cell = done[done.fitness == fitness]
+        lis = cell[cell.approach == "MAP-LIS"]
+        rnd = cell[cell.approach == BASELINE]
+        claim = (
+            f"With {label(fitness)}, MAP-LIS fills its grid better than random sampling "
+            "(not in the study)."
+        )
+        rule = "MAP-LIS's median coverage and QD-score exceed RANDOM's on the MAP-LIS grid"
+        if lis.empty or rnd.empty:
+            out.append(Finding(claim, rule, NOT_TESTABLE, "no finished MAP-LIS or RANDOM trials"))
+            continue
+        medians = {
+            name: (frame.coverage.median(), frame.qd_score.median())
+            for name, frame in (("MAP-LIS", lis), (BASELINE, rnd))
+        }
+        better = all(m > r for m, r in zip(medians["MAP-LIS"], medians[BASELINE], strict=True))
+        evidence = "; ".join(
+            f"{name} median coverage {c:.4f}, QD-score {q:.4g}" for name, (c, q) in medians.items()
+        )
+        out.append(Finding(claim, rule, HOLDS if better else DOES_NOT_HOLD, evidence))
+    return out
 
 
 def _oversized(grid: GridData) -> Finding:
     """Returns the check of "F_sl tends to evolve oversized linkages" via best-path sizes."""
     sizes = best_path_sizes(grid)
+    sizes = sizes[sizes.approach != BASELINE]
     claim = "F_sl tends to evolve oversized linkages."
     rule = (
-        "the median size of the best paths (max of width and height) is larger with F_sl "
-        "than with F_p, over all approaches"
+        "the median size of the best-ever paths (max of width and height) is larger with "
+        "F_sl than with F_p, over the study's approaches"
     )
     by_fitness = sizes.groupby("fitness")["size"].median()
     if not {"Fp", "Fsl"} <= set(by_fitness.index):

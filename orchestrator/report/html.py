@@ -8,7 +8,11 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from orchestrator.report.findings import REPRODUCED, Finding
+from orchestrator.config import STUDY_EVALUATIONS
+from orchestrator.report.findings import HOLDS, REPRODUCED, Finding
+
+MIN_TRIALS_PER_CELL = 5
+"""Below this many finished trials a cell's statistics are flagged as weak."""
 
 STYLE = """
 body { font-family: sans-serif; max-width: 1200px; margin: 2em auto; color: #222; }
@@ -39,11 +43,50 @@ def _table(frame: pd.DataFrame) -> str:
     return f"<table><tr>{head}</tr>{''.join(rows)}</table>"
 
 
+def context(config: dict, summary: pd.DataFrame) -> tuple[str, list[str]]:
+    """Returns the sentence naming what the grid ran, and the warnings a reader needs.
+
+    Warnings: a budget below the study's, and cells with fewer than MIN_TRIALS_PER_CELL
+    finished trials.
+    """
+    budget = config.get("evaluations")
+    approaches = config.get("approaches") or sorted(summary.approach.unique())
+    fitnesses = config.get("fitnesses") or sorted(summary.fitness.unique())
+    said = (
+        f"Budget {budget:,} evaluations per trial (batches of {config.get('batch_size')}), "
+        if isinstance(budget, int)
+        else "Budget unknown, "
+    )
+    said += (
+        f"mode {config.get('mode', '?')}, target {config.get('target', '?')}, "
+        f"{config.get('trials', '?')} trials per approach and fitness; approaches "
+        f"{', '.join(approaches)}; fitness {', '.join(fitnesses)}."
+    )
+    warnings = []
+    if isinstance(budget, int) and budget < STUDY_EVALUATIONS:
+        warnings.append(
+            f"The budget, {budget:,} evaluations per trial, is below the study's "
+            f"{STUDY_EVALUATIONS:,}: the numbers are not the study's answer."
+        )
+    thin = summary[summary.n_finished < MIN_TRIALS_PER_CELL]
+    if len(thin):
+        cells = ", ".join(
+            f"{r.approach}/{r.fitness} ({r.n_finished})" for r in thin.itertuples(index=False)
+        )
+        warnings.append(
+            f"Fewer than {MIN_TRIALS_PER_CELL} finished trials in {cells}: their statistics "
+            "are weak."
+        )
+    return said, warnings
+
+
 def render_html(
     *,
     grid_id: str,
     parent_run_id: str,
     tracking_uri: str,
+    config: dict,
+    config_text: str,
     figures: Sequence[tuple[str, str, bytes]],
     summary: pd.DataFrame,
     tests: pd.DataFrame,
@@ -56,6 +99,8 @@ def render_html(
         grid_id: the grid's id.
         parent_run_id: the grid's parent MLflow run.
         tracking_uri: the store the grid was read from.
+        config: the grid's resolved config.
+        config_text: the same as TOML, shown in full.
         figures: (title, caption, PNG bytes) per figure, in order.
         summary: `stats.summary_table`.
         tests: `stats.pairwise_tests`.
@@ -71,6 +116,12 @@ def render_html(
         f"<code>{html.escape(tracking_uri)}</code>; {len(trials)} trials, "
         f"{int((trials.status == 'FINISHED').sum())} finished.</p>",
     ]
+    said, warnings = context(config, summary)
+    parts.append(f"<p class='context'>{html.escape(said)}</p>")
+    parts += [f"<div class='warn'>{html.escape(w)}</div>" for w in warnings]
+    parts.append(
+        f"<details><summary>Config</summary><pre>{html.escape(config_text)}</pre></details>"
+    )
     if len(unfinished):
         parts.append(
             f"<div class='warn'>{len(unfinished)} trials did not finish and are left out of "
@@ -80,7 +131,7 @@ def render_html(
     parts.append("<h2>The study's findings on this grid</h2><table>")
     parts.append("<tr><th>claim</th><th>verdict</th><th>rule</th><th>evidence</th></tr>")
     for f in findings:
-        css = "reproduced" if f.verdict == REPRODUCED else "other"
+        css = "reproduced" if f.verdict in (REPRODUCED, HOLDS) else "other"
         parts.append(
             f"<tr><td class='text'>{html.escape(f.claim)}</td>"
             f"<td class='text {css}'>{html.escape(f.verdict)}</td>"
@@ -91,9 +142,11 @@ def render_html(
     parts.append("<h2>Best loss per approach and fitness</h2>")
     parts.append(_table(summary))
     parts.append(
-        "<h2>Pairwise tests</h2><p>Two-sided Mann–Whitney U on the best loss, Holm-corrected "
-        "within each fitness; A12 = P(loss_a &gt; loss_b) + P(=)/2, so A12 &lt; 0.5 means "
-        "approach a tends to lower (better) losses.</p>"
+        "<h2>Pairwise tests</h2><p>Two-sided Mann–Whitney U on the best-ever loss: exact "
+        "where the pooled sample has no ties, else asymptotic (column <i>method</i>). "
+        "Holm-corrected within each fitness and family (<i>study</i>: the study's "
+        "approaches; <i>baseline</i>: each against RANDOM); A12 = P(loss_a &gt; loss_b) + "
+        "P(=)/2, so A12 &lt; 0.5 means approach a tends to lower (better) losses.</p>"
     )
     parts.append(_table(tests))
     for title, caption, png in figures:

@@ -14,6 +14,8 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 import pandas as pd
 
+from workers.trial import BEST_JSON
+
 APPROACH_ORDER: tuple[str, ...] = (
     "EA",
     "NSGA-II",
@@ -22,8 +24,13 @@ APPROACH_ORDER: tuple[str, ...] = (
     "MAP-LIS",
     "MAP-ST",
     "MAP-AU",
+    "RANDOM",
 )
-"""The study's approaches in report order (the grid config spells NSGA-II, older runs NSGA2)."""
+"""The approaches in report order: the study's six (the grid config spells NSGA-II, older
+runs NSGA2), then the RANDOM baseline."""
+BASELINE = "RANDOM"
+"""The random-sampling baseline: compared with each approach, apart from the study's own
+comparisons."""
 FITNESS_ORDER: tuple[str, ...] = ("Fp", "Fsl", "Fp2", "Fsl2")
 HISTORY_COLUMNS: tuple[str, ...] = (
     "iteration",
@@ -54,9 +61,11 @@ class GridData:
         config: the grid's resolved config (`grid_config.json`, else the parent's params).
         trials: one row per trial (expected by the config or seen in MLflow), columns
             trial_key, approach, fitness, trial_index, seed, run_id, status (FINISHED,
-            FAILED, KILLED, RUNNING or MISSING), error, best_loss (min of the best_loss
-            history; NaN unless FINISHED with metrics), final_evaluations, archive (local
-            parquet path or None).
+            FAILED, KILLED, RUNNING or MISSING), error, best_loss (the best-ever loss, the
+            last logged value), coverage and qd_score (last logged; the approach's own grid
+            for MAP-Elites, the MAP-LIS grid for EA, NSGA-II and RANDOM), all NaN unless
+            FINISHED with metrics, final_evaluations, archive (local parquet path or
+            None), best_linkage (local path of the best-ever linkage document, or None).
         history: long table, one row per trial and iteration: trial_key, approach,
             fitness, status and the HISTORY_COLUMNS present in the runs (NaN where a run
             did not log one).
@@ -145,8 +154,8 @@ def load_grid(
                 [row for _, row in runs.iterrows()],
             )
         )
-    histories = [h for h, _ in fetched]
-    trials = _trial_table(runs, histories, [a for _, a in fetched])
+    histories = [h for h, _, _ in fetched]
+    trials = _trial_table(runs, histories, [a for _, a, _ in fetched], [b for _, _, b in fetched])
     history = _history_table(trials, histories)
     trials = _add_missing(trials, config)
     if trials.empty:
@@ -208,8 +217,11 @@ def _latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
     return runs.reset_index(drop=True)
 
 
-def _fetch_trial(client, row: pd.Series, cache_dir: Path) -> tuple[pd.DataFrame, Path | None]:
-    """Returns (metric history, local archive path or None) of one trial run."""
+def _fetch_trial(
+    client, row: pd.Series, cache_dir: Path
+) -> tuple[pd.DataFrame, Path | None, Path | None]:
+    """Returns (metric history, local archive path, local best-linkage path) of one trial
+    run; a path is None where the run has no such file."""
     folder = cache_dir / row.run_id
     csv = _artefact(row.artifact_uri, "metrics.csv", folder)
     history = pd.read_csv(csv) if csv is not None else _history_from_metrics(client, row)
@@ -218,7 +230,7 @@ def _fetch_trial(client, row: pd.Series, cache_dir: Path) -> tuple[pd.DataFrame,
         archive = _artefact(row.artifact_uri, name, folder)
         if archive is not None:
             break
-    return history, archive
+    return history, archive, _artefact(row.artifact_uri, BEST_JSON, folder)
 
 
 def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
@@ -255,7 +267,10 @@ def _artefact(artifact_uri: str, name: str, folder: Path) -> Path | None:
 
 
 def _trial_table(
-    runs: pd.DataFrame, histories: list[pd.DataFrame], archives: list[Path | None]
+    runs: pd.DataFrame,
+    histories: list[pd.DataFrame],
+    archives: list[Path | None],
+    best_linkages: list[Path | None],
 ) -> pd.DataFrame:
     """Returns one row per seen trial with its status and best loss."""
 
@@ -263,10 +278,13 @@ def _trial_table(
         column = f"tags.{name}"
         return runs[column] if column in runs else pd.Series([None] * len(runs), dtype=object)
 
-    best = [
-        float(np.nanmin(h.best_loss)) if "best_loss" in h and h.best_loss.notna().any() else np.nan
-        for h in histories
-    ]
+    def last(name: str) -> list[float]:
+        """The last logged value of metric `name` per trial (NaN where never logged)."""
+        return [
+            float(h[name].dropna().iloc[-1]) if name in h and h[name].notna().any() else np.nan
+            for h in histories
+        ]
+
     evals = [
         float(h.evaluations.max()) if "evaluations" in h and len(h) else np.nan for h in histories
     ]
@@ -280,12 +298,15 @@ def _trial_table(
             "run_id": runs.run_id.astype(object),
             "status": runs.status.astype(object),
             "error": tag("error").astype(object),
-            "best_loss": best,
+            "best_loss": last("best_loss"),  # best-ever: the last value is the lowest
+            "coverage": last("coverage"),
+            "qd_score": last("qd_score"),
             "final_evaluations": evals,
             "archive": [str(a) if a is not None else None for a in archives],
+            "best_linkage": [str(b) if b is not None else None for b in best_linkages],
         }
     )
-    table.loc[table.status != "FINISHED", "best_loss"] = np.nan
+    table.loc[table.status != "FINISHED", ["best_loss", "coverage", "qd_score"]] = np.nan
     return table
 
 
@@ -337,7 +358,13 @@ def _add_missing(trials: pd.DataFrame, config: dict) -> pd.DataFrame:
         return trials
     missing = pd.DataFrame(rows).reindex(columns=trials.columns)
     return pd.concat([trials.astype(object), missing.astype(object)], ignore_index=True).astype(
-        {"best_loss": float, "final_evaluations": float, "trial_index": float}
+        {
+            "best_loss": float,
+            "coverage": float,
+            "qd_score": float,
+            "final_evaluations": float,
+            "trial_index": float,
+        }
     )
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import mannwhitneyu
 
-from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, ordered
+from orchestrator.report.load import APPROACH_ORDER, BASELINE, FITNESS_ORDER, ordered
 
 ALPHA = 0.05
 """Family-wise significance level of the Holm-corrected tests (per fitness)."""
@@ -90,16 +90,36 @@ def summary_table(trials: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def mann_whitney(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
+    """Returns the two-sided Mann–Whitney U of x over y, its p-value and the method:
+    "exact" where the pooled sample has no ties (scipy's exact null distribution), else
+    "asymptotic" (normal approximation with tie and continuity corrections)."""
+    pooled = np.concatenate([x, y])
+    method = "exact" if np.unique(pooled).size == pooled.size else "asymptotic"
+    test = mannwhitneyu(x, y, alternative="two-sided", method=method)
+    return float(test.statistic), float(test.pvalue), method
+
+
+TEST_COLUMNS: tuple[str, ...] = (
+    "fitness", "family", "approach_a", "approach_b", "n_a", "n_b", "median_a", "median_b",
+    "u", "method", "p", "p_holm", "significant", "a12", "magnitude", "better",
+)  # fmt: skip
+"""The columns of `pairwise_tests`."""
+
+
 def pairwise_tests(trials: pd.DataFrame) -> pd.DataFrame:
     """Returns two-sided Mann–Whitney U tests of best loss between approaches, per fitness.
 
-    Holm's correction runs over the pairs within one fitness. Pairs where either side has
-    no finished trial are left out.
+    Two families per fitness, each Holm-corrected on its own: "study" (pairs of the
+    study's approaches) and "baseline" (each approach against RANDOM), so adding the
+    baseline leaves the study's comparisons as they would be without it. Pairs where
+    either side has no finished trial are left out.
 
     Returns:
-        Columns fitness, approach_a, approach_b, n_a, n_b, median_a, median_b, u (U of
-        a), p, p_holm, significant (p_holm < ALPHA), a12 (A12 of a over b), magnitude,
-        better (the approach with the lower median, or "" when equal).
+        `TEST_COLUMNS`: fitness, family, approach_a, approach_b, n_a, n_b, median_a,
+        median_b, u (U of a), method ("exact" or "asymptotic", see `mann_whitney`), p,
+        p_holm, significant (p_holm < ALPHA), a12 (A12 of a over b), magnitude, better
+        (the approach with the lower median, or "" when equal).
     """
     done = trials[(trials.status == "FINISHED") & trials.best_loss.notna()]
     frames = []
@@ -111,35 +131,34 @@ def pairwise_tests(trials: pd.DataFrame) -> pd.DataFrame:
         rows = []
         for a, b in combinations(groups, 2):
             x, y = groups[a], groups[b]
-            test = mannwhitneyu(x, y, alternative="two-sided")
+            u, p, method = mann_whitney(x, y)
             effect = a12(x, y)
             med_a, med_b = float(np.median(x)), float(np.median(y))
             rows.append(
                 {
                     "fitness": fitness,
+                    "family": "baseline" if BASELINE in (a, b) else "study",
                     "approach_a": a,
                     "approach_b": b,
                     "n_a": x.size,
                     "n_b": y.size,
                     "median_a": med_a,
                     "median_b": med_b,
-                    "u": float(test.statistic),
-                    "p": float(test.pvalue),
+                    "u": u,
+                    "method": method,
+                    "p": p,
                     "a12": effect,
                     "magnitude": a12_magnitude(effect),
                     "better": a if med_a < med_b else b if med_b < med_a else "",
                 }
             )
-        if rows:
-            frame = pd.DataFrame(rows)
-            frame.insert(frame.columns.get_loc("p") + 1, "p_holm", holm(frame.p.to_numpy()))
-            frame.insert(frame.columns.get_loc("p_holm") + 1, "significant", frame.p_holm < ALPHA)
-            frames.append(frame)
+        for family in ("study", "baseline"):
+            frame = pd.DataFrame([r for r in rows if r["family"] == family])
+            if frame.empty:
+                continue
+            frame["p_holm"] = holm(frame.p.to_numpy())
+            frame["significant"] = frame.p_holm < ALPHA
+            frames.append(frame[list(TEST_COLUMNS)])
     if not frames:
-        return pd.DataFrame(
-            columns=[
-                "fitness", "approach_a", "approach_b", "n_a", "n_b", "median_a", "median_b",
-                "u", "p", "p_holm", "significant", "a12", "magnitude", "better",
-            ]
-        )  # fmt: skip
+        return pd.DataFrame(columns=list(TEST_COLUMNS))
     return pd.concat(frames, ignore_index=True)

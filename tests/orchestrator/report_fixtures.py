@@ -264,10 +264,17 @@ def write_grid(folder: Path, spec: GridSpec, server_uri: str | None = None) -> W
                 trial_dir.mkdir()
                 history.to_csv(trial_dir / "metrics.csv", index=False)
                 name = "repertoire" if approach.startswith("MAP-") else "population"
-                pq.write_table(
-                    _archive(rng, approach, fitness, final, spec),
-                    trial_dir / f"{name}.parquet",
-                )
+                archive = _archive(rng, approach, fitness, final, spec)
+                pq.write_table(archive, trial_dir / f"{name}.parquet")
+                best = int(np.argmin(archive.column("loss").to_numpy()))
+                path = {
+                    axis: [
+                        None if np.isnan(v) else v
+                        for v in archive.column(f"foot_{axis}")[best].as_py()
+                    ]
+                    for axis in ("x", "y")
+                }
+                (trial_dir / "best_linkage.json").write_text(json.dumps({"foot_path": path}))
                 (trial_dir / "settings.json").write_text(json.dumps({"approach": approach}))
                 for path in sorted(trial_dir.iterdir()):
                     client.log_artifact(run_id, str(path))

@@ -22,7 +22,7 @@ def test_presets_load_as_the_full_study_grid():
     for name in ("quick", "paper"):
         cfg = config.load(CONFIGS / f"{name}.toml")
         assert cfg.trials == 10
-        assert cfg.approaches == config.APPROACHES
+        assert cfg.approaches == config.STUDY_APPROACHES
         assert cfg.fitnesses == ("Fp", "Fsl")
     assert config.load(CONFIGS / "paper.toml").batch_size == 5000
 

@@ -26,23 +26,31 @@ def closed_port() -> int:
         (None, "options.EA.bogus=1", "unknown option(s) 'bogus' for EA"),
         (None, "evaluations=100", "evaluations must be an integer >= the batch size (200)"),
         (None, 'tracking_uri="http://127.0.0.1:{port}"', "is unreachable"),
-        pytest.param(None, "evaluators_per_trial=64", "reserves 64 CPU", marks=pytest.mark.ray),
+        (None, "evaluators_per_trial=64", "reserves 64 CPU"),
+        (None, "trial_cpus=64", "reserves 65 CPU"),
+        (None, "evaluators_per_trial=0;trial_cpus=0", "'trial_cpus' = 0.0 is invalid"),
+        (None, "options.MAP-AU.initial_epoch=3", "unknown option(s) 'initial_epoch' for MAP-AU"),
     ],
 )
-def test_bad_grid_input_fails_before_any_trial(tmp_path, capsys, toml_text, override, expected):
-    path = tiny_config_file(tmp_path, tracking_uri=f"sqlite:///{tmp_path / 'store' / 'm.db'}")
+@pytest.mark.parametrize("dry_run", [False, True])
+def test_bad_grid_input_fails_before_anything_starts(
+    tmp_path, capsys, toml_text, override, expected, dry_run
+):
+    """Refused before Ray starts or the store is written, by a launch and by --dry-run."""
+    store = tmp_path / "store"
+    path = tiny_config_file(tmp_path, tracking_uri=f"sqlite:///{store / 'm.db'}")
     if toml_text is not None:
         path.write_text(toml_text)
-    args = ["grid", str(path), "--no-progress"]
-    if override is not None:
-        args += ["--set", override.format(port=closed_port())]
+    args = ["grid", str(path), "--no-progress", *(["--dry-run"] if dry_run else [])]
+    for one in [] if override is None else override.split(";"):
+        args += ["--set", one.format(port=closed_port())]
+    if override is not None and "MAP-AU" in override:
+        args += ["--set", 'approaches=["MAP-AU"]']
     code = main(args)
     err = capsys.readouterr().err
-    assert code == 2
-    assert expected in err, err
+    assert (code, expected in err) == (2, True), err
     assert not ray.is_initialized()
-    trial_runs = list((tmp_path / "store").glob("trials/*/*"))
-    assert trial_runs == []
+    assert not store.exists()
 
 
 def test_ui_refuses_a_missing_store(tmp_path, capsys):

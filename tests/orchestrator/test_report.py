@@ -273,7 +273,7 @@ def test_cli_reports_latest_grid_and_names_unknown_grids(grid, tmp_path, capsys)
     assert main(["report", "a'b", "--tracking-uri", written.uri, "--no-log"]) == 2
     assert 'grid id "a\'b" is invalid' in capsys.readouterr().err
     assert main(["report", "--latest", "--tracking-uri", f"sqlite:///{tmp_path}/x.db"]) == 2
-    assert "no MLflow database" in capsys.readouterr().err
+    assert "no MLflow store at" in capsys.readouterr().err
 
 
 def test_a_grid_without_trials_is_a_clear_error(tmp_path, capsys):
@@ -326,3 +326,38 @@ def test_report_downloads_artefacts_through_a_tracking_server(mlflow_server, tmp
     client = MlflowClient(tracking_uri=mlflow_server)
     logged = {a.path for a in client.list_artifacts(written.parent_run_id, "report")}
     assert "report/report.html" in logged
+
+
+def test_compare_puts_two_grids_side_by_side(tmp_path, capsys):
+    """Two grids in one store, the second drawn with another seed: every shared cell is
+    compared with the statistics recomputed here from the raw losses."""
+    first = write_grid(tmp_path / "a", GridSpec(grid_id="g0first", seed=1))
+    second = write_grid(tmp_path / "b", GridSpec(grid_id="g0second", seed=2), server_uri=first.uri)
+    from orchestrator.report.compare import compare_grids
+
+    table = compare_grids(first.uri, "g0first", "g0second")
+    assert len(table) == 4 * 2
+    for row in table.itertuples():
+        x, y = (
+            np.array(
+                [
+                    v
+                    for k, v in w.final_best.items()
+                    if k.startswith(f"{row.approach}/{row.fitness}/")
+                ]
+            )
+            for w in (first, second)
+        )
+        assert (row.n_a, row.n_b) == (x.size, y.size)
+        assert row.median_a == pytest.approx(np.median(x)) and row.median_b == pytest.approx(
+            np.median(y)
+        )
+        assert row.difference == pytest.approx(np.median(y) - np.median(x))
+        assert row.p == pytest.approx(mannwhitneyu(x, y, method="exact").pvalue)
+    out = tmp_path / "cmp.csv"
+    args = ["compare", "g0first", "g0second", "--tracking-uri", first.uri, "--out", str(out)]
+    assert main(args) == 0
+    assert "a = grid g0first, b = grid g0second" in capsys.readouterr().out
+    assert pd.read_csv(out).shape == (8, 13)
+    assert main(["compare", "g0first", "nope", "--tracking-uri", first.uri]) == 2
+    assert "nope" in capsys.readouterr().err

@@ -1,0 +1,79 @@
+"""The report's statistics and header on hand-made trial tables (no store needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.stats import mannwhitneyu
+
+from orchestrator.report.html import context
+from orchestrator.report.stats import mann_whitney, pairwise_tests, summary_table
+
+
+def trials(losses: dict[tuple[str, str], list[float]]) -> pd.DataFrame:
+    """Returns a GridData.trials-like table of FINISHED trials with these best losses."""
+    rows = [
+        {"approach": a, "fitness": f, "status": "FINISHED", "best_loss": loss}
+        for (a, f), values in losses.items()
+        for loss in values
+    ]
+    return pd.DataFrame(rows)
+
+
+def test_mann_whitney_is_exact_without_ties_and_asymptotic_with_them():
+    x, y = np.arange(10.0), np.arange(10.0) + 4.5
+    u, p, method = mann_whitney(x, y)
+    exact = mannwhitneyu(x, y, alternative="two-sided", method="exact")
+    assert method == "exact" and (u, p) == (exact.statistic, exact.pvalue)
+    assert mannwhitneyu(x, y, alternative="two-sided").pvalue != p  # scipy's default differs
+    tied = np.append(x[:-1], 5.5)
+    _, p_tied, method = mann_whitney(tied, y)
+    assert method == "asymptotic"
+    assert p_tied == mannwhitneyu(tied, y, alternative="two-sided", method="asymptotic").pvalue
+
+
+def test_random_forms_its_own_holm_family():
+    rng = np.random.default_rng(0)
+    table = trials(
+        {
+            ("EA", "Fp"): list(rng.normal(20, 1, 10)),
+            ("MAP-LIS", "Fp"): list(rng.normal(15, 1, 10)),
+            ("NSGA2", "Fp"): list(rng.normal(16, 1, 10)),
+            ("RANDOM", "Fp"): list(rng.normal(30, 1, 10)),
+        }
+    )
+    tests = pairwise_tests(table)
+    study = tests[tests.family == "study"]
+    baseline = tests[tests.family == "baseline"]
+    assert len(study) == 3 and len(baseline) == 3
+    assert (baseline.approach_b == "RANDOM").all()
+    without = pairwise_tests(table[table.approach != "RANDOM"])
+    np.testing.assert_allclose(study.p_holm.to_numpy(), without.p_holm.to_numpy())
+    assert set(tests.method) == {"exact"}
+
+
+def test_header_names_the_budget_and_warns_about_small_budgets_and_thin_cells():
+    table = trials({("EA", "Fp"): [1.0, 2.0, 3.0], ("MAP-LIS", "Fp"): [1.0] * 6})
+    config = {
+        "evaluations": 1500,
+        "batch_size": 500,
+        "mode": "legacy",
+        "target": "D16",
+        "trials": 6,
+        "approaches": ["EA", "MAP-LIS"],
+        "fitnesses": ["Fp"],
+    }
+    said, warnings = context(config, summary_table(table))
+    assert "1,500 evaluations" in said and "mode legacy" in said and "6 trials" in said
+    assert any("below the study's 726,750" in w for w in warnings)
+    assert any("EA/Fp (3)" in w and "MAP-LIS" not in w for w in warnings)
+    said, warnings = context({**config, "evaluations": 726_750}, summary_table(table))
+    assert not any("below" in w for w in warnings)
+
+
+@pytest.mark.parametrize("approach", ["EA", "MAP-AU"])
+def test_summary_counts_every_finished_trial(approach):
+    table = trials({(approach, "Fsl"): [-3.0, -1.0, -2.0]})
+    row = summary_table(table).iloc[0]
+    assert (row.n_finished, row["median"], row["min"]) == (3, -2.0, -3.0)

@@ -1,0 +1,190 @@
+"""Provides the repertoire drawings a trial and a report share: folded maps and path maps.
+
+A trial logs its own picture (`draw_trial_maps`) to its MLflow run; the report
+(`orchestrator.report.figures`) draws the grid's figures with the same functions.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from matplotlib.collections import LineCollection
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+
+from algorithms.factory import MAP_ELITES
+from algorithms.pareto import non_dominated_ranks
+from sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from workers.artifacts import atomic_path
+
+DOWNSAMPLED = 5
+"""Side of the downsampled path maps (5 × 5 cells, as in the study)."""
+STRIP_PATHS = 5
+"""Paths shown for EA (best of the final population) and NSGA-II (along the front)."""
+LOSS_CMAP = "viridis"
+CLIP_QUANTILE = 0.95
+"""Loss colour scales end at this quantile of the losses shown."""
+
+
+def is_map_elites(approach: str) -> bool:
+    """Returns True for the MAP-Elites approaches (each with its own descriptor grid)."""
+    return approach in MAP_ELITES
+
+
+def is_pareto(approach: str) -> bool:
+    """Returns True for the multi-objective approach (NSGA-II)."""
+    return approach in ("NSGA-II", "NSGA2")
+
+
+def loss_norm(losses: np.ndarray) -> Normalize:
+    """Returns a colour scale from the lowest loss to the 95th percentile of `losses` (n,).
+
+    A few very poor linkages would otherwise take most of the scale; losses above the
+    percentile share the top colour (the colour bar shows an arrow).
+    """
+    if losses.size == 0:
+        return Normalize(0.0, 1.0)
+    low, high = float(losses.min()), float(np.quantile(losses, CLIP_QUANTILE))
+    return Normalize(low, high if high > low else low + 1.0)
+
+
+def fold_bins(bins: np.ndarray, resolution: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Returns (rows (N,), cols (N,), side) placing D-dimensional bins on a 2-D image.
+
+    2-D bins (b0, b1) map to row b0, column b1. 4-D bins (b0, b1, b2, b3) fold to
+    row = b0 * R + b2, column = b1 * R + b3: b0 and b1 choose an R × R block (outer axes),
+    b2 and b3 the cell inside it (inner axes), so R = 10 gives a 100 × 100 image.
+
+    Args:
+        bins: (N, D) int bins, D in {2, 4}.
+        resolution: R, bins per dimension.
+    """
+    bins = np.asarray(bins, dtype=np.int64)
+    if bins.shape[1] == 2:
+        return bins[:, 0], bins[:, 1], resolution
+    if bins.shape[1] == 4:
+        rows = bins[:, 0] * resolution + bins[:, 2]
+        cols = bins[:, 1] * resolution + bins[:, 3]
+        return rows, cols, resolution * resolution
+    raise ValueError(f"can fold 2-D or 4-D bins only, got {bins.shape[1]}-D")
+
+
+def space_of(approach: str, dims: int) -> DescriptorSpace:
+    """Returns the approach's descriptor space (a generic one for an unknown approach)."""
+    space = DESCRIPTOR_SPACES.get(approach)
+    if space is not None and space.dims == dims:
+        return space
+    side = round(10_000 ** (1 / dims))
+    return DescriptorSpace(tuple(f"d{i}" for i in range(dims)), side, (1.0,) * dims)
+
+
+def bin_columns(columns: pd.Index | list[str]) -> list[str]:
+    """Returns the archive's bin columns bin_0, bin_1, ... in order."""
+    found = [c for c in columns if c.startswith("bin_")]
+    return sorted(found, key=lambda c: int(c.removeprefix("bin_")))
+
+
+def select_paths(archive: pd.DataFrame, approach: str) -> pd.DataFrame:
+    """Returns the archive rows to draw, with their grid position.
+
+    MAP-Elites: the best row in each cell of the repertoire downsampled to 5 × 5 (folded
+    4-D maps are downsampled after folding). NSGA-II: 5 rows evenly spaced along the
+    final Pareto front, ordered by the first objective. EA: the 5 lowest losses.
+
+    Returns:
+        The chosen rows plus columns row, col (grid position, row 0 at the bottom).
+    """
+    valid = archive[archive.foot_x.map(lambda v: np.isfinite(np.asarray(v)).any())]
+    if is_map_elites(approach):
+        bins = bin_columns(valid.columns)
+        space = space_of(approach, len(bins))
+        valid = valid[valid.cell >= 0]
+        rows, cols, side = fold_bins(valid[bins].to_numpy(), space.resolution)
+        block = side // DOWNSAMPLED
+        picked = valid.assign(row=rows // block, col=cols // block)
+        best = picked.sort_values("loss").drop_duplicates(["row", "col"])
+        return best.reset_index(drop=True)
+    if is_pareto(approach):
+        losses = valid[["loss_0", "loss_1"]].to_numpy()
+        front = valid[non_dominated_ranks(losses) == 0].sort_values(["loss_0", "loss_1"])
+        front = front.drop_duplicates(["loss_0", "loss_1"])
+        take = np.unique(np.linspace(0, len(front) - 1, min(STRIP_PATHS, len(front))).round())
+        chosen = front.iloc[take.astype(int)]
+    else:
+        chosen = valid.nsmallest(STRIP_PATHS, "loss")
+    return chosen.assign(row=0, col=np.arange(len(chosen))).reset_index(drop=True)
+
+
+def draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize):
+    """Draws each chosen path scaled into its grid cell, with its size in the corner.
+
+    Returns the paths' LineCollection (coloured by loss under `norm`).
+    """
+    segments = []
+    for foot_x, foot_y, row, col in zip(
+        chosen.foot_x, chosen.foot_y, chosen.row, chosen.col, strict=True
+    ):
+        x, y = np.asarray(foot_x, dtype=float), np.asarray(foot_y, dtype=float)
+        keep = np.isfinite(x) & np.isfinite(y)
+        x, y = np.append(x[keep], x[keep][0]), np.append(y[keep], y[keep][0])
+        size = max(np.ptp(x), np.ptp(y))
+        scale = 0.8 / size if size > 0 else 1.0
+        cx, cy = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
+        segments.append(
+            np.column_stack([col + 0.5 + (x - cx) * scale, row + 0.5 + (y - cy) * scale])
+        )
+        ax.text(col + 0.96, row + 0.04, f"{size:.1f}", ha="right", va="bottom", fontsize=5)
+    lines = LineCollection(segments, cmap=LOSS_CMAP, norm=norm, linewidths=0.9)
+    lines.set_array(chosen.loss.to_numpy(dtype=float))
+    ax.add_collection(lines)
+    rows, cols = shape
+    ax.vlines(np.arange(1, cols), 0, rows, color="0.85", lw=0.5)
+    ax.hlines(np.arange(1, rows), 0, cols, color="0.85", lw=0.5)
+    ax.set_xlim(0, cols)
+    ax.set_ylim(0, rows)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    ax.set_aspect("equal")
+    return lines
+
+
+def view_frame(view: dict[str, np.ndarray]) -> pd.DataFrame:
+    """Returns an optimizer's `view()` as the archive table the drawings read (2-D
+    columns become one array per row, as parquet reads them back)."""
+    return pd.DataFrame({k: list(v) if np.ndim(v) == 2 else v for k, v in view.items()})
+
+
+def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> None:
+    """Draws one trial's final repertoire or population to a PNG at `path`, atomically.
+
+    With a grid (MAP-Elites, RANDOM): the best loss of every filled cell (4-D maps folded
+    as in the report) beside the 5 x 5 path map; otherwise the five paths the report draws
+    for the approach.
+    """
+    archive = view_frame(view)
+    bins = bin_columns(archive.columns)
+    # RANDOM keeps a 2-D grid (MAP-LIS's by default): its paths are mapped as that grid's.
+    chosen = select_paths(archive, approach if is_map_elites(approach) or not bins else "MAP-LIS")
+    fig = Figure(figsize=(8.0 if bins else 6.0, 4.0 if bins else 1.8), layout="constrained")
+    norm = loss_norm(archive.loss.to_numpy(dtype=float))
+    if bins:
+        heat, paths = fig.subplots(1, 2)
+        space = space_of(approach, len(bins))
+        rows, cols, side = fold_bins(archive[bins].to_numpy(), space.resolution)
+        image = np.full((side, side), np.nan)
+        image[rows, cols] = archive.loss.to_numpy(dtype=float)
+        shown = heat.imshow(image, origin="lower", cmap=LOSS_CMAP, norm=norm)
+        heat.set_title(f"{approach}: best loss per cell ({len(archive)} filled)", fontsize=8)
+        heat.tick_params(labelsize=6)
+        fig.colorbar(shown, ax=heat, shrink=0.8, extend="max")
+        paths.set_title(f"best path per region ({DOWNSAMPLED} x {DOWNSAMPLED})", fontsize=8)
+        shape = (DOWNSAMPLED, DOWNSAMPLED)
+    else:
+        paths = fig.subplots(1, 1)
+        paths.set_title(f"{approach}: {STRIP_PATHS} paths of the final population", fontsize=8)
+        shape = (1, STRIP_PATHS)
+    draw_paths(paths, chosen, shape, norm)
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110)
