@@ -65,6 +65,11 @@ class AlignmentError(HardwareError):
     """The legs did not reach their phase offsets in position mode in time."""
 
 
+class ShutdownIncomplete(HardwareError):
+    """The shutdown could not stop every motor or turn its torque off; the message names
+    what failed. Raised from the error that ended the walk, if one did."""
+
+
 class StopRequested(HardwareError):
     """A SIGINT or SIGTERM asked the walk to stop; the motors were stopped safely."""
 

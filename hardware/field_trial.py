@@ -109,12 +109,17 @@ class TrialTable:
         floors: column order within each robot (first seen first).
         means: (approach, robot, floor) -> mean distance in cm.
         counts: (approach, robot, floor) -> number of repeats.
+        simulated: True when the table holds the simulated field trials (`--simulate`)
+            instead of the real ones.
+        left_out: field-trial runs of the other kind (simulated or real), not shown.
     """
 
     approaches: tuple[str, ...]
     floors: tuple[str, ...]
     means: dict[tuple[str, str, str], float]
     counts: dict[tuple[str, str, str], int]
+    simulated: bool = False
+    left_out: int = 0
 
     def format(self) -> str:
         """Returns the table as aligned text in the study's Table I layout."""
@@ -133,8 +138,9 @@ class TrialTable:
         return "\n".join(lines)
 
 
-def trial_table(uri: str, experiment: str) -> TrialTable:
-    """Returns the Table I summary of every field-trial run in the experiment."""
+def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialTable:
+    """Returns the Table I summary of the experiment's real field trials, or with
+    `simulated` of its simulated ones (walked on the bus emulator): the two never mix."""
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=uri)
@@ -149,7 +155,8 @@ def trial_table(uri: str, experiment: str) -> TrialTable:
     )
     distances: dict[tuple[str, str, str], list[float]] = {}
     floors: list[str] = []
-    for run in runs:
+    kept = [r for r in runs if (r.data.params.get("simulated") == "True") == simulated]
+    for run in kept:
         tags = run.data.tags
         floor = tags.get("floor", "?")
         if floor not in floors:
@@ -166,4 +173,6 @@ def trial_table(uri: str, experiment: str) -> TrialTable:
         floors=tuple(floors),
         means={k: statistics.fmean(v) for k, v in distances.items() if v},
         counts={k: len(v) for k, v in distances.items()},
+        simulated=simulated,
+        left_out=len(runs) - len(kept),
     )

@@ -14,7 +14,13 @@ import numpy as np
 from hardware import control_table as ct
 from hardware.bus import DxlBus, Status
 from hardware.config import RobotConfig
-from hardware.errors import AlignmentError, HardwareError, MotorNotResponding, WrongModel
+from hardware.errors import (
+    AlignmentError,
+    CommError,
+    HardwareError,
+    MotorNotResponding,
+    WrongModel,
+)
 from hardware.gait import PhaseController, alignment_goals
 from hardware.safety import REBOOT, SafetyMonitor
 from hardware.telemetry import TickRecord
@@ -74,6 +80,10 @@ class Hexapod:
         self.velocity_limits = np.zeros(len(self._ids), dtype=int)
         self._watchdog = config.safety.bus_watchdog_ms // ct.BUS_WATCHDOG_MS_PER_UNIT
         self._open = False
+        self.shutdown_problems: list[str] = []
+        """What the last shutdown could not do (empty: every motor stopped, torque off)."""
+        self._reached: set[int] = set()
+        """Motors that answered their ping: only they can hold torque."""
 
     def __enter__(self) -> Hexapod:
         self.bus.open()
@@ -82,7 +92,8 @@ class Hexapod:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        for problem in self.shutdown():
+        self.shutdown_problems = self.shutdown()
+        for problem in self.shutdown_problems:
             _log.error("shutdown: %s", problem)
 
     def _each(self, item: ct.Item, value: int) -> None:
@@ -102,6 +113,7 @@ class Hexapod:
         """
         for motor in self.config.motors:
             model = self.bus.ping(motor.id)
+            self._reached.add(motor.id)
             if model != ct.MX28_MODEL_NUMBER:
                 raise WrongModel(
                     f"{motor.label} reports model {model}; expected MX-28(2.0), "
@@ -140,9 +152,13 @@ class Hexapod:
     def align(self, stop: threading.Event | None = None) -> None:
         """Turns every leg to its phase offset in position mode, then drops torque.
 
+        Does nothing when `stop` is already set: no torque goes on after a stop request.
+
         Raises:
             AlignmentError: naming the legs still off target after `[align] timeout_s`.
         """
+        if stop is not None and stop.is_set():
+            return
         align = self.config.align
         goals = alignment_goals(self.config.motors)
         self._each(ct.OPERATING_MODE, ct.POSITION_MODE)
@@ -225,17 +241,24 @@ class Hexapod:
         write, the watchdog may have tripped on a motor, so it is re-armed before the
         next goal write (and counted): a stalled host stops the legs only for the stall.
 
+        A sync read that fails on the wire (no answer, or a corrupt or truncated status
+        packet) costs its tick and is counted in `missed_reads`. A stop requested before
+        the walk starts returns at once, before any motor is put in velocity mode.
+
         Raises:
             SafetyStop: a limit or hardware error (see `SafetyMonitor`).
-            MotorNotResponding: a motor missed `max_missed_ticks` sync reads in a row.
+            CommError: `max_missed_ticks` sync reads in a row failed (`MotorNotResponding`
+                naming the motor when it did not answer).
         """
         gait, safety = self.config.gait, self.config.safety
         period = 1.0 / gait.rate_hz
         n_slots = max(1, round(seconds * gait.rate_hz))
+        stop = stop or threading.Event()
+        if stop.is_set():
+            return WalkResult(0, 0.0, 0, 0, 0, 0, 0.0, stopped_early=True)
         controller = PhaseController(gait, self.config.motors, self.velocity_limits)
         monitor = SafetyMonitor(safety, self.config.motors)
         self._enter_velocity_mode(self._ids)
-        stop = stop or threading.Event()
         ticks = skipped = missed = missed_in_row = reboots = rearms = 0
         max_error = 0.0
         watchdog_s = self._watchdog * ct.BUS_WATCHDOG_MS_PER_UNIT / 1000.0
@@ -258,7 +281,7 @@ class Hexapod:
             now = self._clock()
             try:
                 statuses = self.read_state(retries=0)  # a miss costs the tick, not a retry
-            except MotorNotResponding:
+            except CommError:
                 missed += 1
                 missed_in_row += 1
                 self.bus.release()
@@ -300,7 +323,8 @@ class Hexapod:
         """Stops every motor: Goal Velocity 0, torque off, port closed. Idempotent.
 
         Every step is attempted even when an earlier one fails; the failures are
-        returned (and a motor that could not be reached is named in them).
+        returned, naming the motor, for every motor that answered at start-up (one that
+        never answered cannot hold torque).
         """
         if not self._open:
             return []
@@ -317,6 +341,7 @@ class Hexapod:
             try:
                 self.bus.write(motor_id, ct.TORQUE_ENABLE, 0)
             except (HardwareError, OSError) as exc:
-                problems.append(f"torque off failed: {exc}")
+                if motor_id in self._reached:
+                    problems.append(f"torque off failed: {exc}")
         self.bus.close()
         return problems

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from hardware.config import RobotConfig
 from hardware.emulator import BusEmulator
-from hardware.errors import StopRequested
+from hardware.errors import ShutdownIncomplete, StopRequested
 from hardware.hexapod import Hexapod, WalkResult
 from hardware.safety import SignalGuard
 from hardware.telemetry import TelemetryWriter, TickRecord
@@ -33,7 +33,36 @@ def run_walk(
 
     Raises:
         StopRequested: SIGINT or SIGTERM arrived; the motors were stopped first.
+        ShutdownIncomplete: the shutdown failed on some motor (raised from whatever error
+            ended the walk); every other error comes after a complete shutdown.
     """
+    robots: list[Hexapod] = []
+    try:
+        result = _walk_once(config, seconds, telemetry, simulate, on_tick, robots)
+    except BaseException as exc:
+        _check_shutdown(robots, exc)
+        raise
+    _check_shutdown(robots, None)
+    return result
+
+
+def _check_shutdown(robots: list[Hexapod], cause: BaseException | None) -> None:
+    """Raises ShutdownIncomplete (from `cause`) when the robot's shutdown left problems."""
+    problems = [p for robot in robots for p in robot.shutdown_problems]
+    if problems:
+        raise ShutdownIncomplete(
+            "shutdown incomplete, motors may still hold torque: " + "; ".join(problems)
+        ) from cause
+
+
+def _walk_once(
+    config: RobotConfig,
+    seconds: float,
+    telemetry: str | Path | None,
+    simulate: bool,
+    on_tick: Callable[[TickRecord], None] | None,
+    robots: list[Hexapod],
+) -> WalkResult:
     with contextlib.ExitStack() as stack:
         if simulate:
             emulator = stack.enter_context(BusEmulator(config.motor_ids))
@@ -43,6 +72,7 @@ def run_walk(
         if telemetry is not None:
             sinks.insert(0, stack.enter_context(TelemetryWriter(telemetry, config.motor_ids)))
         robot = stack.enter_context(Hexapod(config))
+        robots.append(robot)
         robot.start_up()
         robot.align(stop=guard.event)
 

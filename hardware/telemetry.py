@@ -2,15 +2,15 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
-import os
-import tempfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 from hardware import control_table as ct
 from hardware.bus import Status
+from workers.artifacts import atomic_path
 
 
 @dataclass(frozen=True)
@@ -51,18 +51,21 @@ def row(record: TickRecord, motor_ids: list[int]) -> list[str]:
 
 
 class TelemetryWriter:
-    """Streams rows to a temp file beside `path` and moves it into place on close.
+    """Streams rows to a temp file beside `path` and moves it into place on close
+    (`workers.artifacts.atomic_path`: fsynced, readable as the umask allows).
 
-    Closing also happens after an error or a stop, so a partial walk keeps its rows.
+    Closing also happens after an error or a stop, so a partial walk keeps its rows; a
+    walk that never ticked (a bad port, a missing motor) leaves an existing `path` as it
+    was rather than replacing it with a header.
     """
 
     def __init__(self, path: str | Path, motor_ids: list[int]) -> None:
         self.path = Path(path)
         self._ids = list(motor_ids)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", dir=self.path.parent)
-        self._tmp = Path(tmp)
-        self._file = os.fdopen(fd, "w", newline="", encoding="utf-8")
+        self._commit = contextlib.ExitStack()
+        self._tmp = self._commit.enter_context(atomic_path(self.path))
+        self._file = open(self._tmp, "w", newline="", encoding="utf-8")  # noqa: SIM115
         self._csv = csv.writer(self._file)
         self._csv.writerow(header(self._ids))
         self.rows = 0
@@ -73,13 +76,14 @@ class TelemetryWriter:
         self.rows += 1
 
     def close(self) -> None:
-        """Flushes and atomically replaces `path` with what was written (idempotent)."""
+        """Closes the file and, when it holds a row, atomically replaces `path` with it
+        (idempotent)."""
         if self._file.closed:
             return
-        self._file.flush()
-        os.fsync(self._file.fileno())
         self._file.close()
-        os.replace(self._tmp, self.path)
+        if not self.rows:
+            self._tmp.unlink()
+        self._commit.close()
 
     def __enter__(self) -> TelemetryWriter:
         return self

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import importlib.metadata
 import sys
 
 # Each subcommand module exposes `register(subparsers)`; the registered parser sets
@@ -23,12 +24,38 @@ class CliError(Exception):
     """Bad command-line input; the message names the bad value and what is allowed."""
 
 
+class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Appends "(default: ...)" to each option's help unless the help already says it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str | None:
+        if action.help and "default" in action.help:
+            return action.help
+        return super()._get_help_string(action)
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose help shows every option's default (its subcommands too)."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("formatter_class", DefaultsFormatter)
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+
+
+def version() -> str:
+    """Returns the installed linkevo version."""
+    try:
+        return importlib.metadata.version("linkevo")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Returns the parser with every available subcommand registered."""
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="linkevo",
         description="Evolve mechanical linkages for legged robots and run the experiments.",
     )
+    parser.add_argument("--version", action="version", version=f"linkevo {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMAND_MODULES:
         try:
@@ -45,9 +72,11 @@ def main(argv: list[str] | None = None) -> int:
     """Runs the CLI and returns the process exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    from workers.tracking import TrackingUriError
+
     try:
         return int(args.func(args) or 0)
-    except CliError as exc:
+    except (CliError, TrackingUriError) as exc:
         print(f"linkevo {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

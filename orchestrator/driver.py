@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import socket
 import statistics
 import sys
@@ -14,11 +15,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from mlflow.entities import Param
+from mlflow.entities import Metric, Param
 from mlflow.tracking import MlflowClient
 
 from orchestrator.config import ConfigError, GridConfig, flatten, to_toml
 from orchestrator.grid import Grid, TrialCell
+from orchestrator.reservation import Cluster, Reservation
 from workers.tracking import ensure_experiment, resolve_tracking_uri
 from workers.trial import TrialSpec
 from workers.trial_task import TrialJob, TrialOutcome, end_run, outcome_of, trial_runs
@@ -27,6 +29,31 @@ LOCAL_OBJECT_STORE_BYTES = 512 * 1024**2
 """Object store of a Ray instance the driver starts itself: the trial objects are small."""
 PROGRESS_POLL_SECONDS = 5.0
 """How often the progress view reads the running trials' evaluation counts from MLflow."""
+
+
+class GridInterrupted(Exception):
+    """A SIGINT or SIGTERM stopped the grid; the in-flight trials were cancelled and their
+    runs marked KILLED, so `--resume` completes the grid.
+
+    Attributes:
+        signal_name: "SIGINT" or "SIGTERM".
+        finished: the grid's trials FINISHED when it stopped (earlier launches' included).
+        killed: trials in flight at the signal.
+        waiting: trials not started yet.
+    """
+
+    def __init__(self, signal_name: str, finished: int, killed: int, waiting: int) -> None:
+        super().__init__(signal_name)
+        self.signal_name = signal_name
+        self.finished = finished
+        self.killed = killed
+        self.waiting = waiting
+
+    def __str__(self) -> str:
+        return (
+            f"stopped by {self.signal_name}: {self.finished} trial(s) finished, "
+            f"{self.killed} in flight marked KILLED, {self.waiting} not started"
+        )
 
 
 @dataclass(frozen=True)
@@ -91,16 +118,16 @@ def trial_dir(root: Path, grid: Grid, cell: TrialCell) -> Path:
     return root / "trials" / grid.grid_id / cell.dirname
 
 
-def describe(grid: Grid) -> str:
+def describe(grid: Grid, cluster: Cluster) -> str:
     """Returns the dry-run text: resolved config, grid id, reservation and every trial."""
     cfg = grid.config
+    reservation = Reservation.plan(cfg, len(grid.cells), cluster)
+    where = "this machine" if cluster.local else "the Ray cluster"
     lines = [
         to_toml(cfg).rstrip(),
         "",
         f"grid {grid.grid_id}  code {grid.code_version}  {len(grid.cells)} trials",
-        f"each trial reserves {cfg.per_trial_cpus():g} CPU "
-        f"({cfg.evaluators_per_trial} evaluator actor(s) x {cfg.cpus_per_evaluator:g} CPU"
-        f" + {cfg.trial_cpus:g} for the trial loop)",
+        f"on {where} ({cluster.total_cpus:g} CPU): {reservation.describe()}",
         "",
         f"{'trial key':<20} {'seed':>10}",
     ]
@@ -119,12 +146,15 @@ def _parent_run(client: MlflowClient, experiment_id: str, grid: Grid) -> str:
     if existing:
         run_id = existing[0].info.run_id
         client.update_run(run_id, status="RUNNING")
+        if "error" in existing[0].data.tags:  # the error of a launch that is over
+            client.delete_tag(run_id, "error")
         return run_id
     tags = {
         "linkevo.kind": "grid",
         "grid_id": grid.grid_id,
         "code_version": grid.code_version,
         "host": socket.gethostname(),
+        "mlflow.note.content": grid_description(grid),
     }
     run_id = client.create_run(experiment_id, run_name=f"grid-{grid.grid_id}", tags=tags)
     run_id = run_id.info.run_id
@@ -147,52 +177,47 @@ def warm_kernels() -> None:
     evaluate(random_genomes(np.random.default_rng(0), 2))
 
 
-def _connect_ray(address: str | None) -> bool:
+def uses_local_ray(address: str | None) -> bool:
+    """Returns True when the driver starts its own Ray instance (no address, no RAY_ADDRESS)."""
+    return not (address or os.environ.get("RAY_ADDRESS"))
+
+
+def dry_run_cluster(address: str | None) -> Cluster:
+    """Returns the cluster a grid would run on: this machine for a local instance (nothing
+    starts), else the running cluster's CPUs (joined, read, left)."""
+    if uses_local_ray(address):
+        return Cluster.this_machine()
+    import ray
+
+    started = _connect_ray(address, Cluster.this_machine())
+    try:
+        return Cluster.of_ray()
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def _connect_ray(address: str | None, cluster: Cluster) -> bool:
     """Connects to Ray; returns True when this call started (and must stop) it.
 
     An explicit address or RAY_ADDRESS joins that cluster; otherwise a new local
-    instance starts (a running `ray start` cluster is joined only with `--address auto`).
+    instance starts with `cluster`'s CPUs (a running `ray start` cluster is joined only
+    with `--address auto`).
     """
     import ray
 
     if ray.is_initialized():
         return False
-    if address or os.environ.get("RAY_ADDRESS"):
+    if not uses_local_ray(address):
         ray.init(address=address)
     else:
         ray.init(
             address="local",
+            num_cpus=int(cluster.total_cpus),
             include_dashboard=False,
             object_store_memory=LOCAL_OBJECT_STORE_BYTES,
         )
     return True
-
-
-def _check_fits(config: GridConfig) -> int:
-    """Returns how many trials may run at once; raises when one trial cannot fit at all."""
-    import ray
-
-    nodes = [n for n in ray.nodes() if n.get("Alive")]
-    total = sum(n["Resources"].get("CPU", 0.0) for n in nodes)
-    largest = max((n["Resources"].get("CPU", 0.0) for n in nodes), default=0.0)
-    biggest_bundle = max(config.cpus_per_evaluator, config.trial_cpus)
-    if config.per_trial_cpus() > total or biggest_bundle > largest:
-        raise ConfigError(
-            f"one trial reserves {config.per_trial_cpus():g} CPU (evaluators_per_trial="
-            f"{config.evaluators_per_trial}, cpus_per_evaluator={config.cpus_per_evaluator:g},"
-            f" trial_cpus={config.trial_cpus:g}) but the Ray cluster has {total:g} CPU "
-            f"(largest node {largest:g}); allowed: a reservation that fits the cluster"
-        )
-    if config.max_concurrent_trials:
-        return config.max_concurrent_trials
-    return max(1, int(total // config.per_trial_cpus()))
-
-
-def _bundles(config: GridConfig) -> list[dict[str, float]]:
-    """Returns a trial's placement-group bundles: the trial task's own (if it reserves
-    CPUs), then one per evaluator actor."""
-    own = [{"CPU": config.trial_cpus}] if config.trial_cpus > 0 else []
-    return own + [{"CPU": config.cpus_per_evaluator}] * config.evaluators_per_trial
 
 
 def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
@@ -233,6 +258,7 @@ class _Context:
     root: Path
     client: MlflowClient
     specs: dict[str, TrialSpec]
+    reservation: Reservation
 
     def job(self, grid: Grid, cell: TrialCell) -> TrialJob:
         """Returns the trial task's input for one cell."""
@@ -245,8 +271,9 @@ class _Context:
             trial_index=cell.index,
             spec=self.specs[cell.key],
             out_dir=str(trial_dir(self.root, grid, cell)),
-            evaluators=grid.config.evaluators_per_trial,
-            cpus_per_evaluator=grid.config.cpus_per_evaluator,
+            evaluators=self.reservation.evaluators,
+            cpus_per_evaluator=self.reservation.cpus_per_evaluator,
+            threads=self.reservation.threads,
         )
 
 
@@ -311,27 +338,56 @@ class _Progress:
 
 
 def _fan_out(
-    grid: Grid, cells: list[TrialCell], ctx: _Context, progress: _Progress, limit: int
+    grid: Grid, cells: list[TrialCell], ctx: _Context, progress: _Progress
 ) -> dict[str, TrialOutcome]:
     """Runs `cells` as Ray trial tasks, each in its own placement group, collecting results
     with `ray.wait` as they finish; a failed trial is recorded and the others go on."""
     import ray
-    from ray.util.placement_group import placement_group, remove_placement_group
-    from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
+    from ray.util.placement_group import remove_placement_group
 
-    from workers.trial_task import RETRYABLE_ERRORS, run_trial_job
+    from workers.trial_task import run_trial_job
 
-    cfg = grid.config
     task = ray.remote(run_trial_job)
     pending = deque(cells)
     in_flight: dict[ray.ObjectRef, tuple[TrialCell, object]] = {}
     outcomes: dict[str, TrialOutcome] = {}
+    try:
+        _run_tasks(grid, ctx, progress, task, pending, in_flight, outcomes)
+    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM turned into one by the CLI
+        for ref, (_, group) in in_flight.items():
+            ray.cancel(ref, force=True)
+            remove_placement_group(group)
+        name = str(exc) if str(exc).startswith("SIG") else "SIGINT"
+        done = sum(o.status == "FINISHED" for o in outcomes.values())
+        raise GridInterrupted(name, done, len(in_flight), len(pending)) from exc
+    return outcomes
+
+
+def _run_tasks(
+    grid: Grid,
+    ctx: _Context,
+    progress: _Progress,
+    task: object,
+    pending: deque[TrialCell],
+    in_flight: dict[object, tuple[TrialCell, object]],
+    outcomes: dict[str, TrialOutcome],
+) -> None:
+    """The fan-out loop of `_fan_out`: keeps `reservation.concurrent` trial tasks in flight
+    and records each outcome as its task ends."""
+    import ray
+    from ray.util.placement_group import placement_group, remove_placement_group
+    from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
+
+    from workers.trial_task import RETRYABLE_ERRORS
+
+    cfg = grid.config
+    reservation = ctx.reservation
     while pending or in_flight:
-        while pending and len(in_flight) < limit:
+        while pending and len(in_flight) < reservation.concurrent:
             cell = pending.popleft()
-            group = placement_group(_bundles(cfg), strategy="PACK")
+            group = placement_group(reservation.bundles(), strategy="PACK")
             ref = task.options(
-                num_cpus=cfg.trial_cpus,
+                num_cpus=reservation.trial_cpus,
                 max_retries=cfg.max_retries,
                 retry_exceptions=list(RETRYABLE_ERRORS),
                 scheduling_strategy=PlacementGroupSchedulingStrategy(
@@ -354,28 +410,47 @@ def _fan_out(
             else:
                 failed += 1
         progress.update(len(in_flight), finished, failed)
-    return outcomes
+
+
+def check_restart(grid: Grid, restart: tuple[str, ...], resume: bool) -> None:
+    """Raises ConfigError for a `--restart-trial` key the grid lacks, or without resume."""
+    if not restart:
+        return
+    if not resume:
+        raise ConfigError("--restart-trial needs --resume: it restarts a trial of a grid")
+    keys = {cell.key for cell in grid.cells}
+    for key in restart:
+        if key not in keys:
+            raise ConfigError(
+                f"--restart-trial {key!r}: not a trial of grid {grid.grid_id}; allowed: a "
+                f"trial key APPROACH/FITNESS/INDEX such as {grid.cells[0].key}"
+            )
 
 
 def launch(
     grid: Grid,
     *,
     resume: bool = False,
+    restart: tuple[str, ...] = (),
     address: str | None = None,
     progress: bool = True,
     stream: TextIO = sys.stderr,
 ) -> GridResult:
     """Runs every trial of `grid` not already FINISHED and returns how each ended.
 
-    Order: build and check every trial spec, check the tracking store, create the MLflow
-    database and experiment, mark stale RUNNING runs KILLED (resume), connect to Ray and
-    check the reservation fits, warm the numba kernel, log (or on resume reuse) the grid's
-    parent run, fan out one task per trial.
+    Order: build and check every trial spec, check the tracking store, check that one
+    trial's reservation fits (this machine's CPUs for a local instance, before Ray starts;
+    else the cluster's, once connected), create the MLflow database and experiment, mark
+    stale RUNNING runs KILLED (resume), plan the reservation for the trials left
+    (`orchestrator.reservation`), start a local Ray instance, warm the numba kernel, log
+    (or on resume reuse) the grid's parent run, fan out one task per trial.
 
     Args:
         grid: the grid to run.
         resume: complete an earlier launch of the same grid: skip FINISHED trials, mark
             stale RUNNING runs KILLED and rerun them (from their checkpoints).
+        restart: trial keys (with `resume`) whose checkpoints are discarded, so they run
+            afresh (a damaged checkpoint); a FINISHED one is refused.
         address: Ray address; None honours RAY_ADDRESS, else starts a local instance.
         progress: show the live progress bar.
         stream: where the progress bar goes.
@@ -387,32 +462,57 @@ def launch(
     start = time.monotonic()
     cfg = grid.config
     specs = trial_specs(grid)
+    check_restart(grid, restart, resume)
     uri = resolve_tracking_uri(cfg.tracking_uri or None)
     check_tracking_uri(uri)
-    experiment_id = ensure_experiment(uri, cfg.experiment)
-    client = MlflowClient(uri)
-    earlier = trial_runs(client, experiment_id, grid.grid_id)
-    if earlier and not resume:
-        raise ConfigError(
-            f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {uri}; "
-            "pass --resume to complete it, or change the config (e.g. --set seed=1)"
-        )
-    finished = {r.data.tags["trial_key"]: r for r in earlier if r.info.status == "FINISHED"}
-    for run in earlier:
-        if run.info.status == "RUNNING":
-            end_run(client, run.info.run_id, "KILLED", "stale: the grid driver stopped")
-    todo = [cell for cell in grid.cells if cell.key not in finished]
-    started_ray = _connect_ray(address) if todo else False
+    local = uses_local_ray(address)
+    if local:  # refused before Ray starts or the store is written
+        cluster = Cluster.this_machine()
+        Reservation.plan(cfg, len(grid.cells), cluster)
+        started_ray = False
+    else:
+        started_ray = _connect_ray(address, Cluster.this_machine())
+        cluster = Cluster.of_ray()
     try:
-        limit = _check_fits(cfg) if todo else 0
+        Reservation.plan(cfg, len(grid.cells), cluster)
+        experiment_id = ensure_experiment(uri, cfg.experiment)
+        client = MlflowClient(uri)
+        earlier = trial_runs(client, experiment_id, grid.grid_id)
+        if earlier and not resume:
+            raise ConfigError(
+                f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {uri}; "
+                "pass --resume to complete it, or change the config (e.g. --set seed=1)"
+            )
+        finished = {r.data.tags["trial_key"]: r for r in earlier if r.info.status == "FINISHED"}
+        for run in earlier:
+            if run.info.status == "RUNNING":
+                end_run(client, run.info.run_id, "KILLED", "stale: the grid driver stopped")
+        done_restarts = sorted(set(restart) & set(finished))
+        if done_restarts:
+            raise ConfigError(
+                f"--restart-trial {', '.join(done_restarts)}: already FINISHED; a finished "
+                "trial is kept (change the config for a new grid)"
+            )
+        root = work_root(cfg, uri)
+        for cell in grid.cells:
+            if cell.key in restart:
+                shutil.rmtree(trial_dir(root, grid, cell), ignore_errors=True)
+        todo = [cell for cell in grid.cells if cell.key not in finished]
+        reservation = Reservation.plan(cfg, len(todo), cluster)
+        if todo and local:
+            started_ray = _connect_ray(address, cluster)
         if todo:
             warm_kernels()
         parent_run_id = _parent_run(client, experiment_id, grid)
-        ctx = _Context(uri, experiment_id, parent_run_id, work_root(cfg, uri), client, specs)
+        ctx = _Context(uri, experiment_id, parent_run_id, root, client, specs, reservation)
         view = _Progress(ctx, grid, len(grid.cells) - len(todo), progress, stream)
         try:
-            ran = _fan_out(grid, todo, ctx, view, limit)
+            ran = _fan_out(grid, todo, ctx, view)
         except BaseException as exc:
+            if isinstance(exc, GridInterrupted):
+                exc.finished += len(finished)
+            for run in trial_runs(client, experiment_id, grid.grid_id, status="RUNNING"):
+                end_run(client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
             end_run(client, parent_run_id, "KILLED", f"{type(exc).__name__}: {exc}")
             raise
         finally:
@@ -426,6 +526,7 @@ def launch(
         outcome_of(finished[c.key]) if c.key in finished else ran[c.key] for c in grid.cells
     )
     status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
+    log_cell_summaries(client, parent_run_id, cfg, outcomes)
     client.set_terminated(parent_run_id, status)
     return GridResult(
         grid_id=grid.grid_id,
@@ -435,6 +536,63 @@ def launch(
         outcomes=outcomes,
         skipped=tuple(c.key for c in grid.cells if c.key in finished),
         seconds=time.monotonic() - start,
+    )
+
+
+def cell_summaries(config: GridConfig, outcomes: tuple[TrialOutcome, ...]) -> dict[str, float]:
+    """Returns the grid parent's summary metrics: per approach and fitness, over the
+    FINISHED trials, `<approach>/<fitness>/best_loss_median`, `.../best_loss_min`,
+    `.../coverage_median`, `.../qd_score_median` and `.../finished` (a count)."""
+    metrics: dict[str, float] = {}
+    for approach in config.approaches:
+        for fitness in config.fitnesses:
+            cell = [
+                o
+                for o in outcomes
+                if o.trial_key.startswith(f"{approach}/{fitness}/") and o.status == "FINISHED"
+            ]
+            prefix = f"{approach}/{fitness}"
+            metrics[f"{prefix}/finished"] = float(len(cell))
+            for name in ("best_loss", "coverage", "qd_score"):
+                values = [getattr(o, name) for o in cell if getattr(o, name) is not None]
+                if values:
+                    metrics[f"{prefix}/{name}_median"] = float(statistics.median(values))
+                if values and name == "best_loss":
+                    metrics[f"{prefix}/best_loss_min"] = float(min(values))
+    return metrics
+
+
+def log_cell_summaries(
+    client: MlflowClient, run_id: str, config: GridConfig, outcomes: tuple[TrialOutcome, ...]
+) -> None:
+    """Logs `cell_summaries` to the grid's parent run, so the MLflow UI's runs table shows
+    each cell's numbers next to the grid (a resumed grid logs them again, updated)."""
+    metrics = [
+        Metric(key, value, int(time.time() * 1000), 0)
+        for key, value in cell_summaries(config, outcomes).items()
+    ]
+    for start in range(0, len(metrics), 1000):
+        client.log_batch(run_id, metrics=metrics[start : start + 1000])
+
+
+def grid_description(grid: Grid) -> str:
+    """Returns the parent run's description (MLflow's `mlflow.note.content`, Markdown):
+    what the grid runs, its budget and how to read the results."""
+    cfg = grid.config
+    return (
+        f"**linkevo grid `{grid.grid_id}`** ({len(grid.cells)} trials): "
+        f"{', '.join(cfg.approaches)} × {', '.join(cfg.fitnesses)}, {cfg.trials} trial(s) "
+        f"each; {cfg.evaluations:,} evaluations per trial in batches of {cfg.batch_size:,}; "
+        f"mode `{cfg.mode}`, target `{cfg.target}`, grid seed {cfg.seed}; code "
+        f"`{grid.code_version}`.\n\n"
+        "The nested runs are the trials (metrics per iteration, the final repertoire or "
+        "population, the best linkage). This run's metrics summarise each approach and "
+        "fitness: `<approach>/<fitness>/best_loss_median`, `best_loss_min`, "
+        "`coverage_median`, `qd_score_median`.\n\n"
+        f"Figures and statistics: `linkevo report {grid.grid_id}` (also logged here under "
+        f"`report/`). A trial's linkage: `linkevo pull RUN_ID`, or `linkevo pull "
+        f"{grid.grid_id} --best --fitness {cfg.fitnesses[0]}`. Resolved config: "
+        "`grid_config.toml`."
     )
 
 
@@ -464,6 +622,12 @@ def summary(result: GridResult, config: GridConfig) -> str:
                 f"{_fmt(min(losses) if losses else None):>14} "
                 f"{_fmt(statistics.median(losses) if losses else None):>10}"
             )
+    cut = [o.trial_key for o in result.outcomes if o.stopped_by == "max_seconds"]
+    if cut:
+        lines += [
+            "",
+            f"{len(cut)} trial(s) stopped by max_seconds before their budget: {', '.join(cut)}",
+        ]
     if result.failed:
         lines += ["", "failed trials:"]
         lines += [f"  {o.trial_key:<18} {o.error or o.status}" for o in result.failed]

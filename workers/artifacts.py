@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
+import secrets
+import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -13,33 +14,81 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+TEMP_INFIX = ".tmp-"
+"""Marks a temporary file: `.<stem>.tmp-<host>-<pid>-<random><suffix>` beside its target."""
+
+
+def _temp_name(path: Path) -> Path:
+    token = secrets.token_hex(4)
+    return path.with_name(
+        f".{path.stem}{TEMP_INFIX}{socket.gethostname()}-{os.getpid()}-{token}{path.suffix}"
+    )
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def sweep_stale_temps(path: Path) -> list[Path]:
+    """Deletes the temporary files that writers of `path` on this host left when they
+    died (their pid no longer runs); returns them. Live writers' and other hosts' files
+    (a shared folder) are left alone."""
+    prefix = f".{path.stem}{TEMP_INFIX}{socket.gethostname()}-"
+    swept = []
+    for candidate in path.parent.glob(f"{prefix}*{path.suffix}"):
+        pid = candidate.name.removeprefix(prefix).partition("-")[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            candidate.unlink(missing_ok=True)
+            swept.append(candidate)
+    return swept
+
+
+def _fsync(path: Path, directory: bool = False) -> None:
+    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
 
 @contextmanager
 def atomic_path(path: Path) -> Iterator[Path]:
     """Yields a temporary path beside `path`; on success it replaces `path` atomically.
 
-    The temporary file lives in the same directory (so `os.replace` is atomic) and keeps
-    the suffix (so writers that choose a format by suffix still work). On error it is
-    removed and `path` is left as it was.
+    The one way linkevo writes a file: the temporary file lives in the same folder (so
+    `os.replace` is atomic), keeps the suffix (writers that pick a format by suffix still
+    work) and is created with mode 0666 less the umask, so the result is as readable as
+    any file the user makes. Before the rename the file is fsynced, and the folder after
+    it. Stale temporary files of dead writers of the same path are swept first. On error
+    the temporary file is removed and `path` is left as it was; a block that deletes the
+    temporary file itself leaves `path` as it was too.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    sweep_stale_temps(path)
+    tmp = _temp_name(path)
+    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
     try:
-        yield tmp_path
-        os.replace(tmp_path, path)
+        yield tmp
+        if not tmp.exists():
+            return
+        _fsync(tmp)
+        os.replace(tmp, path)
+        _fsync(path.parent, directory=True)
     except BaseException:
-        tmp_path.unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
 
 
 def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Writes `data` to `path` atomically (flushed and fsynced before the rename)."""
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
+    """Writes `data` to `path` atomically (see `atomic_path`)."""
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def write_text_atomic(path: Path, text: str) -> None:
@@ -63,8 +112,6 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
             raise ValueError(f"array {name!r} has dtype object; npz artefacts never pickle")
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
 
 
 def read_npz(path: Path) -> dict[str, np.ndarray]:
@@ -73,8 +120,9 @@ def read_npz(path: Path) -> dict[str, np.ndarray]:
         return {name: data[name] for name in data.files}
 
 
-def columns_to_table(columns: dict[str, np.ndarray]) -> pa.Table:
-    """Returns an Arrow table: 1-D arrays become columns, (N, k) arrays list<float64>."""
+def columns_to_table(columns: dict[str, np.ndarray], float32: tuple[str, ...] = ()) -> pa.Table:
+    """Returns an Arrow table: 1-D arrays become columns, (N, k) arrays list<float64>
+    (list<float32> for the columns named in `float32`)."""
     arrays = {}
     for name, value in columns.items():
         value = np.asarray(value)
@@ -83,15 +131,19 @@ def columns_to_table(columns: dict[str, np.ndarray]) -> pa.Table:
         elif value.ndim == 2:
             n, k = value.shape
             offsets = pa.array(np.arange(n + 1, dtype=np.int32) * k)
-            flat = pa.array(np.ascontiguousarray(value, dtype=np.float64).reshape(-1))
+            dtype = np.float32 if name in float32 else np.float64
+            flat = pa.array(np.ascontiguousarray(value, dtype=dtype).reshape(-1))
             arrays[name] = pa.ListArray.from_arrays(offsets, flat)
         else:
             raise ValueError(f"column {name!r} must be 1-D or 2-D, got shape {value.shape}")
     return pa.table(arrays)
 
 
-def write_parquet_atomic(path: Path, columns: dict[str, np.ndarray]) -> None:
-    """Writes named columns (1-D, or (N, k) as list<float64>) to parquet atomically."""
-    table = columns_to_table(columns)
+def write_parquet_atomic(
+    path: Path, columns: dict[str, np.ndarray], float32: tuple[str, ...] = ()
+) -> None:
+    """Writes named columns (1-D, or (N, k) as list<float64>, list<float32> for the
+    columns in `float32`) to zstd-compressed parquet atomically."""
+    table = columns_to_table(columns, float32)
     with atomic_path(path) as tmp:
-        pq.write_table(table, tmp)
+        pq.write_table(table, tmp, compression="zstd")

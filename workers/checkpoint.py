@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import csv
 import json
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,12 +42,70 @@ def save_checkpoint(folder: Path, checkpoint: Checkpoint) -> Path:
     return path
 
 
+class CheckpointError(ValueError):
+    """A trial's checkpoint (or the metrics.csv it continues) cannot be resumed from.
+
+    Attributes:
+        path: the damaged file.
+        problem: what is wrong with it.
+    """
+
+    def __init__(self, path: Path, problem: str) -> None:
+        super().__init__(
+            f"cannot resume from {path}: {problem}; the trial must start afresh "
+            "(`linkevo trial` without --resume, or `linkevo grid CONFIG --resume "
+            "--restart-trial KEY`)"
+        )
+        self.path = path
+        self.problem = problem
+
+
 def load_checkpoint(folder: Path) -> Checkpoint | None:
-    """Returns the checkpoint in `folder`, or None when there is none."""
+    """Returns the checkpoint in `folder`, or None when there is none.
+
+    Raises:
+        CheckpointError: naming the file when it is truncated, not an npz or lacks the
+            bookkeeping entries.
+    """
     path = folder / CHECKPOINT_FILE
     if not path.is_file():
         return None
-    arrays = read_npz(path)
-    rows = int(arrays.pop("checkpoint.rows"))
-    spec = json.loads(str(arrays.pop("checkpoint.spec")[()]))
+    try:
+        arrays = read_npz(path)
+        rows = int(arrays.pop("checkpoint.rows"))
+        spec = json.loads(str(arrays.pop("checkpoint.spec")[()]))
+    except (zipfile.BadZipFile, OSError, EOFError, KeyError, ValueError) as exc:
+        raise CheckpointError(path, f"the file is damaged ({type(exc).__name__}: {exc})") from exc
     return Checkpoint(state=arrays, rows=rows, spec=spec)
+
+
+def checkpointed_rows(metrics: Path, rows: int) -> list[dict[str, float]]:
+    """Returns the first `rows` rows of a trial's metrics.csv, the ones its checkpoint
+    counts; rows after them (a partial row a killed writer left, say) are not read.
+
+    Raises:
+        CheckpointError: naming the file when it holds fewer whole rows than that.
+    """
+    kept: list[dict[str, float]] = []
+    if rows == 0:
+        return kept
+    try:
+        with open(metrics, newline="") as handle:
+            reader = csv.reader(handle)
+            header = next(reader, None)
+            for line, values in enumerate(reader, start=2):
+                if len(kept) == rows:
+                    break
+                if header is None or len(values) != len(header):
+                    raise CheckpointError(metrics, f"row {line} has {len(values)} fields")
+                try:
+                    kept.append({k: float(v) for k, v in zip(header, values, strict=True)})
+                except ValueError as exc:
+                    raise CheckpointError(metrics, f"row {line} is not numbers ({exc})") from exc
+    except FileNotFoundError:
+        pass
+    if len(kept) < rows:
+        raise CheckpointError(
+            metrics, f"it holds {len(kept)} whole rows but the checkpoint counts {rows}"
+        )
+    return kept

@@ -10,7 +10,8 @@ from mlflow.tracking import MlflowClient
 from mlflow.utils.async_logging.run_operations import RunOperations
 
 ARTIFACT_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".json", ".png", ".gif", ".pt")
-"""The trial files logged at the end; the checkpoint folder and temp files stay local."""
+"""The trial files logged at the end; the checkpoint folder and (hidden) temporary files
+are never logged."""
 SEND_EVERY_S = 2.0
 """Seconds between metric sends: the MLflow UI and the grid's progress lag by at most this."""
 MAX_BATCH = 1000
@@ -75,5 +76,6 @@ class MlflowRecorder:
         artefact root."""
         self.flush()
         for path in sorted(Path(out_dir).iterdir()):
-            if path.is_file() and path.suffix in ARTIFACT_SUFFIXES:
+            hidden = path.name.startswith(".")  # temporary files of a writer, never results
+            if path.is_file() and path.suffix in ARTIFACT_SUFFIXES and not hidden:
                 self._client.log_artifact(self._run_id, str(path))

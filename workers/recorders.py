@@ -13,6 +13,7 @@ from typing import Protocol
 from tqdm import tqdm
 
 from workers.artifacts import write_text_atomic
+from workers.checkpoint import checkpointed_rows
 
 
 class Recorder(Protocol):
@@ -105,12 +106,9 @@ class MetricsCsv:
         """Keeps only the first `rows` rows (atomically rewritten); returns them.
 
         Raises:
-            ValueError: when the file holds fewer rows than asked for.
+            CheckpointError: when the file holds fewer whole rows than asked for.
         """
-        kept = self.read()
-        if len(kept) < rows:
-            raise ValueError(f"{self.path} has {len(kept)} rows, the checkpoint expects {rows}")
-        kept = kept[:rows]
+        kept = checkpointed_rows(self.path, rows)
         if not kept:
             self.reset()
             return kept

@@ -2,18 +2,32 @@
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 DEFAULT_STORE_DIR = Path("runs")
 """Where the embedded store lives, relative to the working directory, unless told."""
 DEFAULT_EXPERIMENT = "linkevo"
+EXPERIMENT_KIND = {"mlflow.experimentKind": "custom_model_development"}
+"""Opens the experiment in the MLflow UI's runs table (model development), not its GenAI
+view: a grid's runs are trials with metrics, not traces."""
 
 
 def default_tracking_uri(store_dir: Path | None = None) -> str:
     """Returns the absolute sqlite URI of the embedded store (`<store_dir>/mlflow.db`)."""
     root = (store_dir or DEFAULT_STORE_DIR).resolve()
     return f"sqlite:///{root / 'mlflow.db'}"
+
+
+class TrackingUriError(ValueError):
+    """A tracking URI linkevo cannot use; the message names it and what is allowed."""
+
+
+TRACKING_SCHEMES: tuple[str, ...] = ("http", "https", "sqlite", "postgresql", "mysql", "file")
+"""URI schemes (a `+driver` suffix allowed, e.g. postgresql+psycopg2) MLflow serves here."""
 
 
 def resolve_tracking_uri(uri: str | None = None) -> str:
@@ -23,13 +37,38 @@ def resolve_tracking_uri(uri: str | None = None) -> str:
     Relative sqlite paths are made absolute (MLflow resolves them against each process's
     working directory, which differs between the driver and Ray workers); a bare path is
     taken as a directory for an embedded store.
+
+    Raises:
+        TrackingUriError: for a scheme outside `TRACKING_SCHEMES`.
     """
     uri = uri or os.environ.get("MLFLOW_TRACKING_URI") or default_tracking_uri()
+    scheme = uri.partition("://")[0].partition("+")[0] if "://" in uri else ""
+    if scheme and scheme not in TRACKING_SCHEMES:
+        raise TrackingUriError(
+            f"tracking URI {uri!r}: scheme {scheme!r} is not supported; allowed: an "
+            "http(s):// MLflow server, a sqlite:///ABS/PATH.db store, a database URI "
+            "(postgresql://, mysql://), or a folder for an embedded store"
+        )
     if uri.startswith("sqlite:///"):
         path = Path(uri.removeprefix("sqlite:///"))
         return f"sqlite:///{path.resolve()}"
     if "://" not in uri:
         return default_tracking_uri(Path(uri))
+    return uri
+
+
+def require_store(uri: str) -> str:
+    """Returns `uri` when it names a store that exists (a server or database is taken as
+    existing; a sqlite file must be there), so that reading never creates a store.
+
+    Raises:
+        TrackingUriError: naming the missing file and how to make one.
+    """
+    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).is_file():
+        raise TrackingUriError(
+            f"no MLflow store at {uri.removeprefix('sqlite:///')}; run a grid first "
+            "(linkevo grid configs/quick.toml) or pass --tracking-uri"
+        )
     return uri
 
 
@@ -40,18 +79,43 @@ def artifact_root_for(uri: str) -> str | None:
     return None
 
 
-def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
-    """Creates the store and experiment if needed (driver side, before any fan-out).
+@contextlib.contextmanager
+def store_lock(uri: str) -> Iterator[None]:
+    """Holds an exclusive lock on an embedded sqlite store (`<db>.lock` beside it) while
+    the block runs; no lock is needed for a tracking server, which serialises itself.
 
-    Returns the experiment id. Creating the sqlite schema from one process first avoids
-    the migration race that concurrent first writers hit.
+    MLflow creates or migrates a sqlite schema on a client's first use, in several
+    statements; two processes doing that at once fail (`duplicate column name`) and can
+    leave the store half-migrated. Every process that may be the first to open a store
+    opens it inside this lock.
+    """
+    if not uri.startswith("sqlite:///"):
+        yield
+        return
+    database = Path(uri.removeprefix("sqlite:///"))
+    database.parent.mkdir(parents=True, exist_ok=True)
+    with open(f"{database}.lock", "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
+    """Creates the store and experiment if needed (driver side, before any fan-out), as a
+    model-development experiment (`EXPERIMENT_KIND`); returns the experiment id.
+
+    The store's schema and the experiment are created under `store_lock`, so launches
+    started together on a fresh store queue up instead of racing.
     """
     from mlflow.tracking import MlflowClient
 
-    if uri.startswith("sqlite:///"):
-        Path(uri.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
-    client = MlflowClient(tracking_uri=uri)
-    experiment = client.get_experiment_by_name(name)
-    if experiment is not None:
-        return experiment.experiment_id
-    return client.create_experiment(name, artifact_location=artifact_root_for(uri))
+    with store_lock(uri):
+        client = MlflowClient(tracking_uri=uri)
+        experiment = client.get_experiment_by_name(name)
+        if experiment is not None:
+            return experiment.experiment_id
+        return client.create_experiment(
+            name, artifact_location=artifact_root_for(uri), tags=EXPERIMENT_KIND
+        )

@@ -12,7 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
-from algorithms import APPROACHES, Optimizer, eval_fitness, make_optimizer
+from algorithms import (
+    APPROACHES,
+    REPERTOIRE_APPROACHES,
+    Optimizer,
+    eval_fitness,
+    make_optimizer,
+)
 from sim.evaluation import MODES
 from sim.linkage_doc import to_document
 from workers.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
@@ -20,6 +26,7 @@ from workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from workers.drawing import draw_linkage
 from workers.evaluators import Evaluator, resolve_target
 from workers.recorders import MetricsCsv, Recorder
+from workers.repertoire_plots import draw_trial_maps
 
 TRIAL_FITNESSES: tuple[str, ...] = ("Fp", "Fsl")
 """The fitness functions a trial optimises."""
@@ -30,6 +37,12 @@ RESULT_FILE = "result.json"
 BEST_JSON = "best_linkage.json"
 BEST_PNG = "best_linkage.png"
 ENCODER_PT = "encoder.pt"
+FLOAT32_COLUMNS: tuple[str, ...] = ("foot_x", "foot_y")
+"""Repertoire columns stored as float32: the foot paths, for drawing and inspection, are
+most of a repertoire's bytes, and 7 digits are far finer than a LEGO build. Everything
+else keeps float64: the genome rebuilds the linkage bit for bit (its genes are cut at
+exact bin edges), losses and descriptors are what statistics and cells are computed
+from, and all are small."""
 
 
 class TrialSpecError(ValueError):
@@ -45,7 +58,8 @@ class TrialSpec:
     """One trial: which search, on which loss, for how many evaluations.
 
     Attributes:
-        approach: "EA", "NSGA2", "MAP-WH", "MAP-LIS", "MAP-ST" or "MAP-AU".
+        approach: one of `algorithms.APPROACHES` ("EA", "NSGA2", "MAP-WH", "MAP-LIS",
+            "MAP-ST", "MAP-AU", "RANDOM").
         fitness: "Fp" or "Fsl" (NSGA-II evaluates the two-objective variant).
         evaluations: the budget; the trial runs whole batches while they fit in it (the
             initial population counts), so it must be >= batch_size.
@@ -233,8 +247,10 @@ def _write_torch_state(optimizer: Optimizer, path: Path) -> None:
 
 
 def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
-    name = "repertoire.parquet" if spec.approach.startswith("MAP-") else "population.parquet"
-    write_parquet_atomic(out_dir / name, optimizer.view())
+    kept = "repertoire" if spec.approach in REPERTOIRE_APPROACHES else "population"
+    view = optimizer.view()
+    write_parquet_atomic(out_dir / f"{kept}.parquet", view, float32=FLOAT32_COLUMNS)
+    draw_trial_maps(view, spec.approach, out_dir / f"{kept}.png")
     genome, loss = optimizer.best()
     write_json_atomic(out_dir / BEST_JSON, to_document(genome, spec.mode))
     draw_linkage(genome, spec.mode, out_dir / BEST_PNG)
@@ -253,7 +269,8 @@ def run_trial(
 
     Writes into `out_dir`: `settings.json` (at the start), `metrics.csv` (one flushed row
     per iteration), `checkpoint/state.npz` (every `checkpoint_every` iterations and at
-    the end, atomically), then `repertoire.parquet` (MAP-*) or `population.parquet`
+    the end, atomically), then `repertoire.parquet` and `repertoire.png` (MAP-*,
+    RANDOM) or `population.parquet` and `population.png`
     (EA, NSGA2), `best_linkage.json`, `best_linkage.png`, `encoder.pt` (MAP-AU) and
     `result.json`; finally it
     calls `recorder.log_artifacts(out_dir)`.

@@ -1,17 +1,21 @@
-"""Provides the Ray trial task: one grid trial as a nested MLflow run with evaluator actors."""
+"""Provides the Ray trial task: one grid trial as a nested MLflow run, evaluated in the task
+with numba threads or by evaluator actors."""
 
 from __future__ import annotations
 
 import contextlib
+import shutil
 import socket
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import numba
 import ray
 from mlflow.entities import Param, Run
 from mlflow.tracking import MlflowClient
 
+from workers.evaluators import LocalEvaluator
 from workers.mlflow_recorder import MlflowRecorder
 from workers.ray_evaluator import ActorPoolEvaluator
 from workers.trial import TrialSpec, run_trial
@@ -50,8 +54,9 @@ class TrialJob:
         trial_index: the trial's index within its cell.
         spec: the trial to run.
         out_dir: absolute folder for the trial's files and checkpoints.
-        evaluators: evaluator actors (K).
+        evaluators: evaluator actors (K); 0: the task evaluates itself.
         cpus_per_evaluator: CPUs each actor reserves.
+        threads: numba threads the task evaluates with when K = 0.
     """
 
     tracking_uri: str
@@ -64,6 +69,7 @@ class TrialJob:
     out_dir: str
     evaluators: int
     cpus_per_evaluator: float
+    threads: int = 1
 
     def tags(self) -> dict[str, str]:
         """Returns the tags of the trial's MLflow run (host and Ray node: where it runs)."""
@@ -93,6 +99,9 @@ class TrialOutcome:
         evaluations: evaluations done, when the run logged them.
         seconds: wall time of this attempt.
         error: the failure message ("" when FINISHED).
+        stopped_by: "budget", or "max_seconds" for a trial cut short by its time limit.
+        coverage: the final coverage, when the run logged one.
+        qd_score: the final QD-score, when the run logged one.
     """
 
     trial_key: str
@@ -102,6 +111,9 @@ class TrialOutcome:
     evaluations: int | None
     seconds: float
     error: str = ""
+    stopped_by: str = "budget"
+    coverage: float | None = None
+    qd_score: float | None = None
 
 
 def trial_runs(
@@ -149,6 +161,9 @@ def outcome_of(run: Run, seconds: float = 0.0) -> TrialOutcome:
         evaluations=None if evaluations is None else int(evaluations),
         seconds=seconds,
         error=run.data.tags.get("error", ""),
+        stopped_by=run.data.tags.get("stopped_by", "budget"),
+        coverage=metrics.get("coverage"),
+        qd_score=metrics.get("qd_score"),
     )
 
 
@@ -186,21 +201,27 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
     spec_values = asdict(job.spec)
     client.log_batch(run_id, params=[Param(k, str(spec_values[k])) for k in SPEC_PARAMS])
     start = time.monotonic()
-    evaluator: ActorPoolEvaluator | None = None
+    pool: ActorPoolEvaluator | None = None
     recorder = MlflowRecorder(client, run_id)
     try:
         out_dir = Path(job.out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
-        evaluator = ActorPoolEvaluator.start(
-            n_actors=job.evaluators,
-            cpus_per_actor=job.cpus_per_evaluator,
-            fitness=job.spec.eval_fitness,
-            mode=job.spec.mode,
-            target=job.spec.target,
-            n_angles=job.spec.n_angles,
-            placement_group=ray.util.get_current_placement_group(),
-        )
-        run_trial(job.spec, evaluator, recorder, out_dir, resume=True)
+        spec = job.spec
+        if job.evaluators == 0:
+            numba.set_num_threads(min(job.threads, numba.config.NUMBA_NUM_THREADS))
+            evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
+        else:
+            evaluator = pool = ActorPoolEvaluator.start(
+                n_actors=job.evaluators,
+                cpus_per_actor=job.cpus_per_evaluator,
+                fitness=spec.eval_fitness,
+                mode=spec.mode,
+                target=spec.target,
+                n_angles=spec.n_angles,
+                placement_group=ray.util.get_current_placement_group(),
+            )
+        result = run_trial(spec, evaluator, recorder, out_dir, resume=True)
+        client.set_tag(run_id, "stopped_by", result.stopped_by)
     except RETRYABLE_ERRORS as exc:
         _flush_quietly(recorder)
         end_run(client, run_id, "KILLED", _describe(exc))
@@ -210,8 +231,11 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         end_run(client, run_id, "FAILED", _describe(exc))
         return outcome_of(client.get_run(run_id), time.monotonic() - start)
     finally:
-        if evaluator is not None:
-            evaluator.close()
+        if pool is not None:
+            pool.close()
     if client.get_run(run_id).info.status == "RUNNING":
         client.set_terminated(run_id, "FINISHED")
+        # MLflow holds the finished trial's files now; the local copy (checkpoint
+        # included) would only double the grid's disk use.
+        shutil.rmtree(job.out_dir, ignore_errors=True)
     return outcome_of(client.get_run(run_id), time.monotonic() - start)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
+import shlex
+import signal
 import subprocess
 import sys
 
@@ -41,11 +42,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="complete an earlier launch: skip FINISHED trials, rerun the rest",
     )
     grid.add_argument(
+        "--restart-trial",
+        dest="restart",
+        action="append",
+        default=[],
+        metavar="KEY",
+        help="with --resume: discard trial KEY's checkpoint (e.g. MAP-LIS/Fp/03) and run it "
+        "afresh (repeatable; default: none)",
+    )
+    grid.add_argument(
         "--dry-run",
         action="store_true",
         help="print the resolved config and the trials, start nothing",
     )
-    grid.add_argument("--max-concurrent-trials", type=int, metavar="N")
+    grid.add_argument(
+        "--max-concurrent-trials",
+        type=int,
+        metavar="N",
+        help="trials in flight at once (default: config key max_concurrent_trials)",
+    )
     grid.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     grid.set_defaults(func=run_grid)
 
@@ -58,7 +73,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--tracking-uri",
         help="store to browse (default: MLFLOW_TRACKING_URI, else the embedded runs/ store)",
     )
-    ui.add_argument("--port", type=int, default=5000)
+    ui.add_argument("--port", type=int, default=5000, help="loopback port of the UI")
     ui.set_defaults(func=run_ui)
 
 
@@ -76,17 +91,51 @@ def run_grid(args: argparse.Namespace) -> int:
     from orchestrator import driver
 
     if args.dry_run:
-        print(driver.describe(grid))
+        driver.trial_specs(grid)  # refuses what the launch would refuse
+        driver.check_tracking_uri(driver.resolve_tracking_uri(grid.config.tracking_uri or None))
+        print(driver.describe(grid, driver.dry_run_cluster(args.address)))
         return 0
-    result = driver.launch(
-        grid, resume=args.resume, address=args.address, progress=not args.no_progress
-    )
+    previous = signal.signal(signal.SIGTERM, _interrupt)
+    try:
+        result = driver.launch(
+            grid,
+            resume=args.resume,
+            restart=tuple(args.restart),
+            address=args.address,
+            progress=not args.no_progress,
+        )
+    except driver.GridInterrupted as exc:
+        print(
+            f"linkevo grid: {exc}.\nComplete the grid with:  {_resume_command(args)}",
+            file=sys.stderr,
+        )
+        return 128 + int(getattr(signal, exc.signal_name))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     print(driver.summary(result, grid.config))
     print(
         f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."
     )
     print(f"Open the UI with:  linkevo ui{_ui_flag(result.tracking_uri)}")
     return 1 if result.failed else 0
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """Turns SIGTERM into the KeyboardInterrupt a Ctrl-C raises, so both leave the grid
+    the same way (in-flight trials cancelled and marked KILLED, the store consistent)."""
+    raise KeyboardInterrupt(signal.Signals(signum).name)
+
+
+def _resume_command(args: argparse.Namespace) -> str:
+    """Returns the command line that completes this grid: the same config and options,
+    with --resume."""
+    words = ["linkevo", "grid", str(args.config)]
+    for override in args.overrides:
+        words += ["--set", override]
+    for flag, value in (("--tracking-uri", args.tracking_uri), ("--address", args.address)):
+        if value is not None:
+            words += [flag, value]
+    return shlex.join([*words, "--resume"])
 
 
 def _ui_flag(uri: str) -> str:
@@ -97,7 +146,7 @@ def _ui_flag(uri: str) -> str:
 
 def run_ui(args: argparse.Namespace) -> int:
     """Runs `mlflow ui` on the store, bound to 127.0.0.1, until interrupted."""
-    from workers.tracking import artifact_root_for, resolve_tracking_uri
+    from workers.tracking import artifact_root_for, require_store, resolve_tracking_uri
 
     uri = resolve_tracking_uri(args.tracking_uri)
     if uri.startswith(("http://", "https://")):
@@ -105,11 +154,7 @@ def run_ui(args: argparse.Namespace) -> int:
             f"--tracking-uri {uri!r} is already a server: open it in a browser; "
             "allowed here: a sqlite:/// URI or a store folder"
         )
-    if uri.startswith("sqlite:///") and not os.path.exists(uri.removeprefix("sqlite:///")):
-        raise CliError(
-            f"no MLflow store at {uri.removeprefix('sqlite:///')}; run a grid first "
-            "(linkevo grid configs/quick.toml) or pass --tracking-uri"
-        )
+    require_store(uri)
     command = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri]
     artifacts = artifact_root_for(uri)
     if artifacts:

@@ -38,9 +38,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _robot_options(trial)
     trial.add_argument("--linkage", required=True, help="source trial run: RUN_ID or RUN_ID:CELL")
     trial.add_argument("--floor", required=True, help="floor name, e.g. flat or carpet")
-    trial.add_argument("--robot", default="first", help="first or modified (default: first)")
-    trial.add_argument("--repeats", type=int, default=5, help="walks on this floor (default 5)")
-    trial.add_argument("--seconds", type=float, default=10.0, help="seconds per walk (default 10)")
+    trial.add_argument("--robot", default="first", help="first or modified")
+    trial.add_argument("--repeats", type=int, default=5, help="walks on this floor")
+    trial.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
     trial.add_argument(
         "--distance-cm",
         type=float,
@@ -55,6 +55,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     table = sub.add_parser("table", help="print mean distances as in the study's Table I")
     table.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
     table.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+    table.add_argument(
+        "--simulated",
+        action="store_true",
+        help="show the simulated field trials (walked with --simulate) instead of the real ones",
+    )
     table.set_defaults(func=table_handler)
 
 
@@ -85,12 +90,16 @@ def _exit_code(signal_name: str) -> int:
 
 def walk_handler(args: argparse.Namespace) -> int:
     """Walks once and prints the achieved tick rate."""
-    from hardware.errors import HardwareError, StopRequested
+    from hardware.errors import HardwareError, ShutdownIncomplete, StopRequested
     from hardware.session import run_walk
 
     config = _load(args)
     try:
         result = run_walk(config, args.seconds, telemetry=args.telemetry, simulate=args.simulate)
+    except ShutdownIncomplete as exc:
+        ended = f" after: {exc.__cause__}" if exc.__cause__ is not None else ""
+        print(f"linkevo hexapod walk: {exc}{ended}; cut the motor power", file=sys.stderr)
+        return 1
     except StopRequested as exc:
         print(f"linkevo hexapod walk: {exc}; motors stopped, torque off", file=sys.stderr)
         return _exit_code(exc.signal_name)
@@ -202,17 +211,20 @@ def trial_handler(args: argparse.Namespace) -> int:
 def table_handler(args: argparse.Namespace) -> int:
     """Prints the field-trial means in the study's Table I layout."""
     from hardware.field_trial import FieldTrialError, trial_table
-    from workers.tracking import resolve_tracking_uri
+    from workers.tracking import require_store, resolve_tracking_uri
 
-    uri = resolve_tracking_uri(args.tracking_uri)
-    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).is_file():
-        raise CliError(f"--tracking-uri {uri!r}: no MLflow database there")
+    uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:
-        table = trial_table(uri, args.experiment)
+        table = trial_table(uri, args.experiment, simulated=args.simulated)
     except FieldTrialError as exc:
         raise CliError(str(exc)) from exc
+    kind = "simulated" if table.simulated else "real"
+    other = "real" if table.simulated else "simulated"
     if not table.means:
-        print(f"no field trials logged in experiment {args.experiment!r}")
-        return 0
-    print(table.format())
+        print(f"no {kind} field trials logged in experiment {args.experiment!r}")
+    else:
+        print(f"{kind.capitalize()} field trials:\n{table.format()}")
+    if table.left_out:
+        hint = "" if table.simulated else " (--simulated shows them)"
+        print(f"{table.left_out} {other} field-trial run(s) left out{hint}")
     return 0

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import re
+import sys
 from pathlib import Path
 
 from orchestrator.cli import CliError
@@ -23,29 +25,70 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--best", action="store_true", help="REF is a grid id: take its best trial")
     parser.add_argument("--approach", help="with --best: only this approach")
     parser.add_argument("--fitness", help="with --best: only this fitness")
-    parser.add_argument("--experiment", default="linkevo")
-    parser.add_argument("--tracking-uri", default=None)
-    parser.add_argument("--out", type=Path, default=Path("pulled"))
+    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment")
+    parser.add_argument(
+        "--tracking-uri",
+        default=None,
+        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
+    )
+    parser.add_argument("--out", type=Path, default=Path("pulled"), help="output folder")
     parser.add_argument("--gif", action="store_true", help="also animate one crank turn")
     parser.set_defaults(func=handle)
 
 
+GRID_ID = re.compile(r"[0-9a-f]{6,64}")
+"""What a grid id looks like (the first 12 hex digits of a hash, `docs/grid.md`)."""
+
+
 def best_trial(client, experiment: str, grid_id: str, approach: str | None, fitness: str | None):
-    """Returns the run id of the grid's FINISHED trial with the lowest best_loss."""
+    """Returns the run id of the grid's FINISHED trial with the lowest best_loss.
+
+    Raises:
+        CliError: naming an unknown experiment, grid, approach or fitness with the valid
+            choices, or asking for --fitness when the grid has more than one.
+    """
     exp = client.get_experiment_by_name(experiment)
     if exp is None:
         raise CliError(f"--experiment {experiment!r} does not exist in this tracking store")
-    query = [f"tags.grid_id = '{grid_id}'", "tags.`linkevo.kind` = 'trial'"]
-    query += [f"tags.{k} = '{v}'" for k, v in (("approach", approach), ("fitness", fitness)) if v]
-    runs = client.search_runs(
+    grids = client.search_runs([exp.experiment_id], "tags.`linkevo.kind` = 'grid'")
+    known = sorted({r.data.tags.get("grid_id", "") for r in grids} - {""})
+    if not GRID_ID.fullmatch(grid_id) or grid_id not in known:
+        raise CliError(
+            f"no grid {grid_id!r} in experiment {experiment!r}; known grids: "
+            f"{', '.join(known) or 'none'}"
+        )
+    trials = client.search_runs(
         [exp.experiment_id],
-        " and ".join([*query, "attributes.status = 'FINISHED'"]),
-        order_by=["metrics.best_loss ASC"],
-        max_results=1,
+        f"tags.grid_id = '{grid_id}' and tags.`linkevo.kind` = 'trial' "
+        "and attributes.status = 'FINISHED'",
+        max_results=50_000,
     )
-    if not runs:
-        raise CliError(f"grid {grid_id!r} has no FINISHED trial matching {' and '.join(query)}")
-    return runs[0].info.run_id
+    choices = {
+        key: sorted({r.data.tags.get(key, "") for r in trials} - {""})
+        for key in ("approach", "fitness")
+    }
+    for key, value in (("approach", approach), ("fitness", fitness)):
+        if value is not None and value not in choices[key]:
+            raise CliError(
+                f"--{key} {value!r}: grid {grid_id} has finished trials of "
+                f"{', '.join(choices[key]) or 'no ' + key}"
+            )
+    if fitness is None and len(choices["fitness"]) > 1:
+        raise CliError(
+            f"grid {grid_id} has trials of {' and '.join(choices['fitness'])}, whose losses "
+            f"do not compare; pass --fitness {' or --fitness '.join(choices['fitness'])}"
+        )
+    kept = [
+        r
+        for r in trials
+        if (approach is None or r.data.tags.get("approach") == approach)
+        and (fitness is None or r.data.tags.get("fitness") == fitness)
+        and "best_loss" in r.data.metrics
+    ]
+    if not kept:
+        raise CliError(f"grid {grid_id} has no finished trial with a best loss to pull")
+    best = min(kept, key=lambda r: r.data.metrics["best_loss"])
+    return best.info.run_id
 
 
 def handle(args: argparse.Namespace) -> int:
@@ -54,12 +97,19 @@ def handle(args: argparse.Namespace) -> int:
 
     from orchestrator.pull import pull
     from workers.linkages import LinkageError, LinkageRef, load_source
-    from workers.tracking import resolve_tracking_uri
+    from workers.tracking import require_store, resolve_tracking_uri
 
-    client = MlflowClient(tracking_uri=resolve_tracking_uri(args.tracking_uri))
+    client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
     text = args.ref
     if args.best:
         text = best_trial(client, args.experiment, args.ref, args.approach, args.fitness)
+        run = client.get_run(text)
+        tags = run.data.tags
+        print(
+            f"best trial of grid {args.ref}: {tags.get('trial_key')} (run {text}), best loss "
+            f"{run.data.metrics['best_loss']:.6g}",
+            file=sys.stderr,
+        )
     try:
         source = load_source(client, LinkageRef.parse(text))
     except LinkageError as exc:

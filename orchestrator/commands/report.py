@@ -26,12 +26,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("grid_id", nargs="?", help="the grid id (tag grid_id of its runs)")
     which.add_argument("--latest", action="store_true", help="report the latest grid")
-    parser.add_argument(
-        "--tracking-uri",
-        default=None,
-        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
-    )
-    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+    _store_options(parser)
     parser.add_argument(
         "--out", type=Path, default=None, help="output folder (default: reports/<grid_id>)"
     )
@@ -40,11 +35,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.set_defaults(func=handler)
 
+    compare = subparsers.add_parser(
+        "compare",
+        help="put two grids' best losses side by side, per approach and fitness",
+        description=(
+            "For every approach and fitness two grids share (paper against legacy mode, "
+            "two budgets, ...): each grid's median best loss, the difference and a "
+            "Mann–Whitney U test between the two, Holm-corrected per fitness."
+        ),
+    )
+    compare.add_argument("grid_a", help="the first grid id")
+    compare.add_argument("grid_b", help="the second grid id")
+    _store_options(compare)
+    compare.add_argument(
+        "--out", type=Path, default=None, help="also write the table to this CSV (default: none)"
+    )
+    compare.set_defaults(func=compare_handler)
+
+
+def _store_options(parser: argparse.ArgumentParser) -> None:
+    """Adds --tracking-uri and --experiment, the store a grid is read from."""
+    parser.add_argument(
+        "--tracking-uri",
+        default=None,
+        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
+    )
+    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+
 
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
     from orchestrator.report import GridNotFoundError, build_report
-    from workers.tracking import resolve_tracking_uri
+    from workers.tracking import require_store, resolve_tracking_uri
 
     if args.grid_id is not None and not GRID_ID.fullmatch(args.grid_id):
         raise CliError(
@@ -53,9 +75,7 @@ def handler(args: argparse.Namespace) -> int:
         )
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is a file; allowed: a folder (new or existing)")
-    uri = resolve_tracking_uri(args.tracking_uri)
-    if uri.startswith("sqlite:///") and not Path(uri.removeprefix("sqlite:///")).is_file():
-        raise CliError(f"--tracking-uri {uri!r}: no MLflow database there; run a grid first")
+    uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:
         result = build_report(
             uri,
@@ -71,4 +91,30 @@ def handler(args: argparse.Namespace) -> int:
         print(f"  [{finding.verdict}] {finding.claim} {finding.evidence}")
     if not args.no_log:
         print(f"logged under report/ in parent run {result.parent_run_id}")
+    return 0
+
+
+def compare_handler(args: argparse.Namespace) -> int:
+    """Prints the two grids' comparison table (and writes it as CSV with --out)."""
+    from orchestrator.report import GridNotFoundError
+    from orchestrator.report.compare import compare_grids
+    from workers.artifacts import write_text_atomic
+    from workers.tracking import require_store, resolve_tracking_uri
+
+    for grid in (args.grid_a, args.grid_b):
+        if not GRID_ID.fullmatch(grid):
+            raise CliError(f"grid id {grid!r} is invalid; allowed: letters, digits, '.', '_', '-'")
+    uri = require_store(resolve_tracking_uri(args.tracking_uri))
+    try:
+        table = compare_grids(uri, args.grid_a, args.grid_b, args.experiment)
+    except GridNotFoundError as exc:
+        raise CliError(str(exc)) from exc
+    if table.empty:
+        print(f"grids {args.grid_a} and {args.grid_b} share no finished approach and fitness")
+        return 0
+    print(f"a = grid {args.grid_a}, b = grid {args.grid_b}; difference = median b - median a")
+    print(table.to_string(index=False, float_format=lambda v: f"{v:.4g}"))
+    if args.out is not None:
+        write_text_atomic(args.out, table.to_csv(index=False))
+        print(f"written to {args.out}")
     return 0

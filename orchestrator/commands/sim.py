@@ -22,10 +22,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Decode, simulate and score genomes (N, 56); write the results as npz.",
     )
     ev.add_argument("genomes", type=Path, help="a .npy file holding an (N, 56) float array")
-    ev.add_argument("--fitness", choices=FITNESSES, default="Fp")
-    ev.add_argument("--mode", choices=MODES, default="paper")
+    ev.add_argument("--fitness", choices=FITNESSES, default="Fp", help="loss to compute")
+    ev.add_argument("--mode", choices=MODES, default="paper", help="spec mode")
     ev.add_argument("--target", default="D16", help="D16 (default), D24 or a JSON target file")
-    ev.add_argument("--angles", type=int, default=40, help="crank angles per turn (default 40)")
+    ev.add_argument("--angles", type=int, default=40, help="crank angles per turn (>= 2)")
     ev.add_argument("--out", type=Path, required=True, help="the result .npz file")
     ev.set_defaults(func=run_eval)
 
@@ -36,7 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     show.add_argument("source", help="LINKAGE.json or GENOMES.npy[:ROW] (row 0 by default)")
     show.add_argument("--mode", choices=MODES, default=None, help="for .npy input (default paper)")
-    show.add_argument("--angles", type=int, default=40)
+    show.add_argument("--angles", type=int, default=40, help="crank angles per turn (>= 2)")
     show.add_argument("--out", type=Path, required=True, help="FILE.png (still) or FILE.gif")
     show.set_defaults(func=run_show)
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from algorithms import APPROACHES
 from orchestrator.cli import CliError
 from sim.evaluation import MODES
+from workers.checkpoint import CheckpointError
 from workers.evaluators import LocalEvaluator
 from workers.recorders import ProgressRecorder
 from workers.trial import (
@@ -116,6 +117,8 @@ def handle(args: argparse.Namespace) -> int:
     recorder = ProgressRecorder(spec.evaluations, disable=args.no_progress)
     try:
         result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
+    except CheckpointError as exc:
+        raise CliError(str(exc)) from exc
     finally:
         recorder.close()
     print(

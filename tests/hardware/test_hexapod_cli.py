@@ -100,3 +100,13 @@ def test_unreachable_port_is_reported(config_file, capsys):
     )
     assert code == 1
     assert "cannot open port '/dev/no-such-port'" in capsys.readouterr().err
+
+
+def test_a_walk_that_never_ticked_leaves_an_existing_telemetry_file(config_file, tmp_path):
+    telemetry = tmp_path / "t.csv"
+    telemetry.write_text("an earlier walk's rows\n")
+    cfg = config_file("/dev/no-such-port")
+    argv = ["hexapod", "walk", "--config", str(cfg), "--seconds", "1"]
+    assert main([*argv, "--telemetry", str(telemetry)]) == 1
+    assert telemetry.read_text() == "an earlier walk's rows\n"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []

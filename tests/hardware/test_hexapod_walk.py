@@ -21,6 +21,7 @@ from hardware.errors import (
     HardwareError,
     MotorNotResponding,
     SafetyStop,
+    ShutdownIncomplete,
     StopRequested,
     WrongModel,
 )
@@ -246,16 +247,22 @@ def test_missing_motor_at_start_up_is_named(emulator, config_for):
     assert_all_stopped(emu)
 
 
-def test_motor_that_stops_answering_mid_walk_is_named(emulator, config_for):
+def test_motor_that_stops_answering_mid_walk_is_named_and_its_torque_reported(emulator, config_for):
+    """The walk ends naming the motor; its torque could not be turned off, which the
+    error says instead of claiming every motor stopped."""
     emu = emulator()
 
     def unplug(record):
         if len(emu.packets()) and record.time_s > 0.2:
-            emu.drop_replies(3, 10_000)
+            emu.drop_replies(3, 100_000)
 
-    with pytest.raises(MotorNotResponding, match=r"motor 3 did not answer \(sync read\)"):
+    with pytest.raises(ShutdownIncomplete, match=r"torque off failed: motor 3") as info:
         run_walk(config_for(emu.port), 10.0, on_tick=unplug)
-    assert_all_stopped(emu)
+    cause = info.value.__cause__
+    assert isinstance(cause, MotorNotResponding)
+    assert re.search(r"motor 3 did not answer \(sync read\)", str(cause))
+    others = {i: s for i, s in emu.snapshots().items() if i != 3}
+    assert all(not s.torque_enabled and s.goal_velocity == 0 for s in others.values())
 
 
 def test_overload_is_rebooted_when_policy_allows(emulator, config_for):
@@ -308,4 +315,41 @@ def test_alignment_timeout_names_the_late_legs(emulator, config_for):
     config = config_for(emu.port, align={"profile_velocity_rpm": 1.0, "timeout_s": 0.2})
     with pytest.raises(AlignmentError, match=r"motor 2 \(left-middle\).*did not reach"):
         run_walk(config, 1.0)
+    assert_all_stopped(emu)
+
+
+def test_a_stop_requested_during_start_up_turns_no_torque_on(emulator, config_for):
+    emu = emulator()
+    previous = signal.getsignal(signal.SIGINT)
+
+    def interrupt_at_first_packet():
+        deadline = time.monotonic() + 10.0
+        while not emu.packets() and time.monotonic() < deadline:
+            time.sleep(0.0005)
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=interrupt_at_first_packet).start()
+    with pytest.raises(StopRequested, match="SIGINT"):
+        run_walk(config_for(emu.port), 5.0)
+    assert signal.getsignal(signal.SIGINT) is previous
+    torque_on = [
+        w for w in emu.writes() if w.address == ct.TORQUE_ENABLE.address and w.data == b"\x01"
+    ]
+    modes = [w for w in emu.writes() if w.address == ct.OPERATING_MODE.address]
+    assert torque_on == [] and modes == []
+    assert_all_stopped(emu)
+
+
+def test_a_corrupt_status_packet_costs_one_tick_not_the_walk(emulator, config_for):
+    emu = emulator()
+    injected = []
+
+    def corrupt(record):
+        if record.time_s > 0.3 and not injected:
+            injected.append(record.time_s)
+            emu.corrupt_replies(3, 1)
+
+    result = run_walk(config_for(emu.port), 1.5, on_tick=corrupt)
+    assert injected and result.missed_reads >= 1
+    assert not result.stopped_early and result.ticks > 50
     assert_all_stopped(emu)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -88,8 +89,9 @@ def test_small_grid_ends_with_one_finished_run_per_trial_key(ray_local, tmp_path
     resolved = json.loads(Path(path).read_text())
     assert resolved == grid.config.to_dict()
     assert "grid_config.toml" in {a.path for a in client.list_artifacts(parent.info.run_id)}
+    # One copy of a finished trial's files: MLflow's. The local folder is gone.
     out_dir = trial_dir(work_root(grid.config, uri), grid, grid.cells[0])
-    assert (out_dir / "checkpoint").is_dir()
+    assert not out_dir.exists()
     assert "EA" in summary(result, grid.config)
 
     with pytest.raises(ConfigError, match="pass --resume"):
@@ -164,7 +166,7 @@ def test_grid_logs_through_an_mlflow_server_over_http(ray_local, tmp_path, mlflo
     assert not result.failed
     assert result.tracking_uri == mlflow_server
     check_trial_runs(mlflow_server, grid, result, tmp_path)
-    assert (tmp_path / "work" / "trials" / grid.grid_id).is_dir()
+    assert list((tmp_path / "work" / "trials" / grid.grid_id).iterdir()) == []
     assert (tmp_path / "server-artifacts").is_dir()
 
 
@@ -217,3 +219,33 @@ def test_killed_driver_resumes_only_the_missing_trials(ray_local, tmp_path, monk
         assert all(status == "KILLED" for run_id, status in after[key] if run_id in earlier)
         steps = [m.step for m in client.get_metric_history(new[0][0], "evaluations")]
         assert steps == [1, 2, 3, 4, 5]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_leaves_no_running_trial_and_says_how_to_resume(
+    ray_local, tmp_path, monkeypatch, signum
+):
+    monkeypatch.setenv(CODE_VERSION_ENV, f"signal-test-{signum}")
+    grid = tiny_grid(tmp_path, approaches=["MAP-LIS"], evaluations=2000, trials=3)
+    uri = grid.config.tracking_uri
+    address = ray_local.get_runtime_context().gcs_address
+    command = [sys.executable, "-c", LINKEVO, "grid", str(tmp_path / "tiny.toml"),
+               "--address", address, "--no-progress"]  # fmt: skip
+    ensure_experiment(uri)
+    driver = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    poll_finished(uri, grid.grid_id, 1, driver)
+    driver.send_signal(signum)
+    _, err = driver.communicate(timeout=120)
+    assert driver.returncode == 128 + signum, err[-3000:]
+    name = signal.Signals(signum).name
+    assert f"stopped by {name}:" in err and "marked KILLED" in err
+    assert f"linkevo grid {tmp_path / 'tiny.toml'} --address {address} --resume" in err
+    assert "Traceback" not in err
+    statuses = [status for runs in runs_by_key(uri, grid.grid_id).values() for _, status in runs]
+    assert "RUNNING" not in statuses and "FINISHED" in statuses
+    client = MlflowClient(uri)
+    (parent,) = client.search_runs(
+        [client.get_experiment_by_name("linkevo").experiment_id],
+        f"tags.grid_id = '{grid.grid_id}' and tags.`linkevo.kind` = 'grid'",
+    )
+    assert parent.info.status == "KILLED"

@@ -15,20 +15,27 @@ from sim.linkage_doc import to_document
 from workers.artifacts import write_json_atomic, write_parquet_atomic
 from workers.tracking import ensure_experiment
 
+GRID = "0123456789ab"
+"""A grid with two finished MAP-LIS/Fp trials, the second one better, and one EA/Fsl."""
+
 
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
-    """A real sqlite store with two finished trials of one grid, the second one better."""
+    """A real sqlite store holding GRID."""
     root = tmp_path_factory.mktemp("store")
     uri = f"sqlite:///{root / 'mlflow.db'}"
     experiment = ensure_experiment(uri)
     client = MlflowClient(uri)
+    client.create_run(experiment, tags={"grid_id": GRID, "linkevo.kind": "grid"})
     genomes = sim.random_genomes(np.random.default_rng(8), 300)
     ev = sim.evaluate(genomes)
     valid = np.flatnonzero(ev.error == 0)[:6]
     runs = []
-    for rank, loss in enumerate((40.0, 25.0)):
-        tags = {"grid_id": "g1", "linkevo.kind": "trial", "approach": "MAP-LIS", "fitness": "Fp"}
+    for rank, (approach, fitness, loss) in enumerate(
+        (("MAP-LIS", "Fp", 40.0), ("MAP-LIS", "Fp", 25.0), ("EA", "Fsl", -30.0))
+    ):
+        tags = {"grid_id": GRID, "linkevo.kind": "trial", "approach": approach, "fitness": fitness}
+        tags["trial_key"] = f"{approach}/{fitness}/{rank:02d}"
         run = client.create_run(experiment, tags=tags)
         client.log_param(run.info.run_id, "mode", "paper")
         client.log_metric(run.info.run_id, "best_loss", loss)
@@ -74,13 +81,41 @@ def test_pull_a_cell_and_the_best_trial_of_a_grid(store, tmp_path):
     rows = list(csv.DictReader((cell / "build_sheet.csv").open()))
     assert [int(r["holes"]) for r in rows] == [r["holes"] for r in sheet]
     best = tmp_path / "grid-best"
-    assert main(["pull", "g1", "--best", "--tracking-uri", uri, "--out", str(best)]) == 0
+    argv = ["pull", GRID, "--best", "--fitness", "Fp", "--tracking-uri", uri, "--out", str(best)]
+    assert main(argv) == 0
     assert runs[1] in (best / "build_sheet.md").read_text()
 
 
-def test_pull_refuses_unknown_cell_and_grid(store, tmp_path, capsys):
+def test_pull_best_asks_for_the_fitness_when_the_grid_has_two(store, tmp_path, capsys):
+    uri = store[0]
+    assert main(["pull", GRID, "--best", "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "has trials of Fp and Fsl" in err and "--fitness Fp or --fitness Fsl" in err
+    argv = ["pull", GRID, "--best", "--approach", "EA", "--fitness", "Fp", "--tracking-uri", uri]
+    assert main([*argv, "--out", str(tmp_path)]) == 2
+    assert "--approach 'EA'" not in capsys.readouterr().err  # EA exists; EA/Fp does not
+    argv = ["pull", GRID, "--best", "--approach", "GA", "--fitness", "Fp", "--tracking-uri", uri]
+    assert main([*argv, "--out", str(tmp_path)]) == 2
+    assert "--approach 'GA': grid 0123456789ab has finished trials of EA, MAP-LIS" in (
+        capsys.readouterr().err
+    )
+
+
+@pytest.mark.parametrize("ref", ["nope", "a'b", "fedcba987654"])
+def test_pull_refuses_unknown_cell_and_grid(store, tmp_path, capsys, ref):
     uri, runs, _, _ = store
     assert main(["pull", f"{runs[0]}:5", "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
     assert "cell 5 is not in the repertoire" in capsys.readouterr().err
-    assert main(["pull", "nope", "--best", "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
-    assert "no FINISHED trial" in capsys.readouterr().err
+    assert main(["pull", ref, "--best", "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
+    assert f"no grid {ref!r} in experiment 'linkevo'; known grids: {GRID}" in (
+        capsys.readouterr().err
+    )
+
+
+def test_pull_never_creates_a_store(tmp_path, capsys):
+    folder = tmp_path / "nothing"
+    assert main(["pull", "x", "--tracking-uri", str(folder), "--out", str(tmp_path)]) == 2
+    assert "no MLflow store at" in capsys.readouterr().err
+    assert not folder.exists()
+    assert main(["pull", "x", "--tracking-uri", "ftp://host/x", "--out", str(tmp_path)]) == 2
+    assert "scheme 'ftp' is not supported" in capsys.readouterr().err

@@ -58,3 +58,16 @@ def test_every_iteration_is_sent_when_the_interval_is_zero(tmp_path):
     assert len(recorder._pending) == 3
     recorder.flush()
     assert steps(client, run_id, "loss") == [1, 2, 3]
+
+
+def test_result_files_are_logged_and_hidden_temporary_files_are_not(tmp_path):
+    client, run_id = new_run(tmp_path)
+    out = tmp_path / "trial"
+    (out / "checkpoint").mkdir(parents=True)
+    for name in ("metrics.csv", "repertoire.parquet", "repertoire.png", "notes.txt"):
+        (out / name).write_text("x")
+    (out / ".repertoire.tmp-host-99999-abcd.parquet").write_text("a killed writer's")
+    (out / "checkpoint" / "state.npz").write_text("local only")
+    MlflowRecorder(client, run_id).log_artifacts(out)
+    logged = sorted(a.path for a in client.list_artifacts(run_id))
+    assert logged == ["metrics.csv", "repertoire.parquet", "repertoire.png"]

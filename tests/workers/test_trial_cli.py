@@ -98,3 +98,40 @@ def test_cli_refuses_an_unwritable_folder(
     )
     assert code == 2
     assert f"output folder {str(out)!r} is not writable" in err
+
+
+def _damage_truncated_state(out: Path) -> str:
+    state = out / "checkpoint" / "state.npz"
+    state.write_bytes(state.read_bytes()[:200])
+    return f"cannot resume from {state}: the file is damaged (BadZipFile"
+
+
+def _damage_short_metrics(out: Path) -> str:
+    metrics = out / "metrics.csv"
+    lines = metrics.read_text().splitlines(keepends=True)
+    metrics.write_text("".join(lines[:2]))
+    return f"cannot resume from {metrics}: it holds 1 whole rows but the checkpoint counts 3"
+
+
+def _damage_partial_row(out: Path) -> str:
+    metrics = out / "metrics.csv"
+    lines = metrics.read_text().splitlines(keepends=True)
+    metrics.write_text("".join(lines[:2]) + lines[2][:15])
+    return f"cannot resume from {metrics}: row 3 has"
+
+
+@pytest.mark.parametrize(
+    "damage", [_damage_truncated_state, _damage_short_metrics, _damage_partial_row]
+)
+def test_cli_resume_of_a_damaged_checkpoint_names_the_file_and_the_remedy(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], damage
+) -> None:
+    out = tmp_path / "trial"
+    args = ["--approach", "EA", "--fitness", "Fp", "--out", str(out), *SMALL]
+    args += ["--checkpoint-every", "1"]
+    assert run_cli(args, capsys)[0] == 0
+    expected = damage(out)
+    code, _, err = run_cli([*args, "--resume"], capsys)
+    assert code == 2, err
+    assert expected in err and "without --resume" in err and "--restart-trial KEY" in err
+    assert "Traceback" not in err

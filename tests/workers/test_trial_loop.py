@@ -184,6 +184,21 @@ def test_resume_continues_exactly_as_an_uninterrupted_run(
     np.testing.assert_array_equal(np.stack(one["genome"]), np.stack(two["genome"]))
 
 
+def test_a_partial_row_after_the_checkpoint_is_dropped_on_resume(
+    tmp_path: Path, crashing_evaluator
+) -> None:
+    """A writer killed mid-row leaves half a row after the checkpointed ones."""
+    spec = spec_for("EA", evaluations=7 * BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "whole")
+    with pytest.raises(RuntimeError, match="evaluator crashed"):
+        run_trial(spec, crashing_evaluator(evaluator_for(spec), fail_at=6), NullRecorder(),
+                  tmp_path / "cut")  # fmt: skip
+    metrics = tmp_path / "cut" / "metrics.csv"
+    metrics.write_text(metrics.read_text() + "6.0,600.0,12.3")
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "cut", resume=True)
+    assert read_rows(metrics) == read_rows(tmp_path / "whole" / "metrics.csv")
+
+
 def test_resume_refuses_a_checkpoint_of_another_trial(tmp_path: Path) -> None:
     spec = spec_for("EA", evaluations=2 * BATCH)
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
