@@ -50,9 +50,12 @@ def load_genomes(path: Path) -> np.ndarray:
     except ValueError as exc:
         raise CliError(f"cannot read {str(path)!r} as a numeric .npy array: {exc}") from exc
     try:
-        return validate_genomes(genomes)
+        genomes = validate_genomes(genomes)
     except GenomeError as exc:
         raise CliError(f"{path}: {exc}") from exc
+    if len(genomes) == 0:
+        raise CliError(f"{path} holds no genomes (shape {genomes.shape}); allowed: (N, 56), N >= 1")
+    return genomes
 
 
 def check_writable(path: Path, suffixes: tuple[str, ...]) -> None:
@@ -64,6 +67,12 @@ def check_writable(path: Path, suffixes: tuple[str, ...]) -> None:
         raise CliError(f"output folder {str(folder)!r} does not exist")
 
 
+def check_angles(angles: int) -> None:
+    """Raises CliError unless `angles` (crank angles per turn) is at least 2."""
+    if angles < 2:
+        raise CliError(f"--angles must be >= 2, got {angles}")
+
+
 def run_eval(args: argparse.Namespace) -> int:
     """Handles `linkevo eval`."""
     from sim.evaluate import evaluate
@@ -72,8 +81,7 @@ def run_eval(args: argparse.Namespace) -> int:
 
     genomes = load_genomes(args.genomes)
     check_writable(args.out, (".npz",))
-    if args.angles < 2:
-        raise CliError(f"--angles must be >= 2, got {args.angles}")
+    check_angles(args.angles)
     try:
         target = resolve_target(args.target)
     except ValueError as exc:
@@ -104,6 +112,7 @@ def run_show(args: argparse.Namespace) -> int:
     from workers.drawing import draw_linkage
 
     check_writable(args.out, SUFFIXES)
+    check_angles(args.angles)
     source = args.source
     if source.endswith(".json"):
         path = Path(source)

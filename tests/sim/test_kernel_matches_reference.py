@@ -169,7 +169,7 @@ def test_angle_error_when_the_foot_beam_angles_cancel_exactly(mode):
 
 
 def test_helpers_compile_inlined_with_noalias_arrays():
-    """The build docs/benchmarks.md measures: a numba without the `noalias` flag would fall
+    """The build `sim_throughput` measures: a numba without the `noalias` flag would fall
     back, silently, to the slower build (equal outputs), and this would say so."""
     from sim import kernels
 
