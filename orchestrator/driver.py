@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import statistics
 import sys
+import threading
 import time
 import urllib.error
 import urllib.request
@@ -208,6 +210,8 @@ def _connect_ray(address: str | None, cluster: Cluster) -> bool:
 
     if ray.is_initialized():
         return False
+    in_main = threading.current_thread() is threading.main_thread()
+    before = signal.getsignal(signal.SIGTERM) if in_main else None
     if not uses_local_ray(address):
         ray.init(address=address)
     else:
@@ -217,6 +221,11 @@ def _connect_ray(address: str | None, cluster: Cluster) -> bool:
             include_dashboard=False,
             object_store_memory=LOCAL_OBJECT_STORE_BYTES,
         )
+    if in_main:
+        # ray.init installs SIGTERM handlers (a native one that dumps a stack, a Python
+        # one that exits); give the signal back to the handler this process had (the
+        # CLI's turns it into a clean stop).
+        signal.signal(signal.SIGTERM, before)
     return True
 
 
