@@ -475,15 +475,14 @@ def launch(
     uri = resolve_tracking_uri(cfg.tracking_uri or None)
     check_tracking_uri(uri)
     local = uses_local_ray(address)
-    if local:  # refused before Ray starts or the store is written
+    if local:  # a local instance starts later, with this machine's CPUs
         cluster = Cluster.this_machine()
-        Reservation.plan(cfg, len(grid.cells), cluster)
         started_ray = False
     else:
         started_ray = _connect_ray(address, Cluster.this_machine())
         cluster = Cluster.of_ray()
     try:
-        Reservation.plan(cfg, len(grid.cells), cluster)
+        Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
         client = MlflowClient(uri)
         earlier = trial_runs(client, experiment_id, grid.grid_id)
