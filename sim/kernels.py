@@ -261,8 +261,9 @@ def place_triangle(new, ni, nf, legacy, xs, ys, ok):
     triangle runs the generic circle_point, split in two passes over the angles. The first
     stores 1/d' and a in the node's own rows, the second reads them back and places the
     node: each pass has a shorter dependency chain than one pass would, so more angles are
-    in flight at once (docs/simulator.md, "Kernel design"). Legacy's tangent point P0 + r0 e is the generic
-    formula with a = r0, whose h is then a zero, so the first pass stores r0 there: adding
+    in flight at once (docs/simulator.md, "Kernel design"). Legacy's tangent point
+    P0 + r0 e is the generic formula with a = r0, whose h is then a zero, so the first
+    pass stores r0 there: adding
     that zero changes no bit, as P0 + r0 e is never -0 (docs/simulator.md). Otherwise
     the first pass is circle_point's distance_terms and the second the rest of its
     operations, in its order, so the results are the same bit for bit.
