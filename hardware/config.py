@@ -45,6 +45,7 @@ class GaitConfig:
     ki: float = field(default=2.0, metadata=_range(0.0))
     kd: float = field(default=0.2, metadata=_range(0.0))
     integral_limit_rpm: float = field(default=10.0, metadata=_range(0.0))
+    integral_band_deg: float = field(default=15.0, metadata=_range(0.0, 180.0))
     max_lag_s: float = field(default=0.25, metadata=_range(0.0))
 
 

@@ -91,7 +91,10 @@ class PhaseController:
         dt = 0.0 if self._last_t is None else t - self._last_t
         derivative = np.zeros_like(error)
         if dt > 0.0:
-            self._integral += error * dt
+            # Integrate only near the clock: a leg that was held or slipped far behind
+            # would otherwise wind the integral up and overshoot for kp / ki seconds.
+            near = np.abs(error) <= np.radians(gait.integral_band_deg)
+            self._integral += np.where(near, error * dt, 0.0)
             if gait.ki > 0.0:
                 bound = gait.integral_limit_rpm / gait.ki
                 np.clip(self._integral, -bound, bound, out=self._integral)
