@@ -63,9 +63,11 @@ def check_trial_runs(uri: str, grid, result, tmp_path: Path) -> None:
         for name in ("best_loss", "mean_loss", "coverage", "qd_score"):
             assert len(client.get_metric_history(run_id, name)) == len(history)
         names = {a.path for a in client.list_artifacts(run_id)}
-        kept = "repertoire.parquet" if cell.approach.startswith("MAP") else "population.parquet"
-        expected = {"metrics.csv", kept, "best_linkage.json", "best_linkage.png", "settings.json"}
-        assert expected <= names, names
+        kept = "repertoire" if cell.approach.startswith("MAP") else "population"
+        expected = {"metrics.csv", f"{kept}.parquet", f"{kept}.png", "best_linkage.json"}
+        assert expected | {"best_linkage.png", "settings.json"} <= names, names
+        assert not any(name.startswith(".") for name in names)
+        assert tags["stopped_by"] == "budget"
         local = client.download_artifacts(run_id, "metrics.csv", str(tmp_path))
         rows = list(csv.DictReader(Path(local).read_text().splitlines()))
         assert len(rows) == len(history)
@@ -84,6 +86,14 @@ def test_small_grid_ends_with_one_finished_run_per_trial_key(ray_local, tmp_path
     assert parent.info.run_name == f"grid-{grid.grid_id}"
     assert parent.data.tags["linkevo.kind"] == "grid"
     assert parent.data.tags["code_version"] == grid.code_version
+    assert f"linkevo report {grid.grid_id}" in parent.data.tags["mlflow.note.content"]
+    assert parent.data.metrics["EA/Fp/finished"] == grid.config.trials
+    assert parent.data.metrics["MAP-LIS/Fsl/best_loss_min"] == min(
+        o.best_loss for o in result.outcomes if o.trial_key.startswith("MAP-LIS/Fsl/")
+    )
+    assert "MAP-LIS/Fp/qd_score_median" in parent.data.metrics
+    experiment = client.get_experiment(parent.info.experiment_id)
+    assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
     assert parent.data.params["approaches"] == "['EA', 'MAP-LIS']"
     path = client.download_artifacts(parent.info.run_id, "grid_config.json", str(tmp_path))
     resolved = json.loads(Path(path).read_text())
