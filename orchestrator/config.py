@@ -67,7 +67,7 @@ class GridConfig:
             evaluator's reservation; the two take turns).
         checkpoint_every: iterations between checkpoints, >= 1.
         max_concurrent_trials: trials in flight at once; 0 = as many as the cluster fits.
-        max_retries: Ray retries of a trial after a node or worker failure, >= 0.
+        max_retries: retries of a trial after a node, worker or actor loss, >= 0.
         experiment: MLflow experiment name.
         tracking_uri: MLflow tracking URI; "" = the embedded store (or MLFLOW_TRACKING_URI).
         work_dir: folder for trial checkpoints; "" = next to the embedded store.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import signal
@@ -12,7 +13,8 @@ import threading
 import time
 import urllib.error
 import urllib.request
-from collections import deque
+from collections import Counter, deque
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
@@ -34,7 +36,7 @@ PROGRESS_POLL_SECONDS = 5.0
 
 
 class GridInterrupted(Exception):
-    """A SIGINT or SIGTERM stopped the grid; the in-flight trials were cancelled and their
+    """A SIGINT or SIGTERM stopped the grid; the in-flight trials were stopped and their
     runs marked KILLED, so `--resume` completes the grid.
 
     Attributes:
@@ -223,8 +225,8 @@ def _connect_ray(address: str | None, cluster: Cluster) -> bool:
         )
     if in_main:
         # ray.init installs SIGTERM handlers (a native one that dumps a stack, a Python
-        # one that exits); give the signal back to the handler this process had (the
-        # CLI's turns it into a clean stop).
+        # one that exits); give the signal back to the handler this process had
+        # (`_signals_stop_the_grid` installs the grid's own around the fan-out).
         signal.signal(signal.SIGTERM, before)
     return True
 
@@ -268,6 +270,8 @@ class _Context:
     client: MlflowClient
     specs: dict[str, TrialSpec]
     reservation: Reservation
+    owns_ray: bool
+    """True when this launch connected to (or started) Ray itself, and may disconnect."""
 
     def job(self, grid: Grid, cell: TrialCell) -> TrialJob:
         """Returns the trial task's input for one cell."""
@@ -304,6 +308,7 @@ class _Progress:
         from tqdm import tqdm
 
         self._ctx = ctx
+        self._stream = stream
         self._grid_id = grid.grid_id
         self._start_ms = int(time.time() * 1000)
         self._start = time.monotonic()
@@ -341,32 +346,75 @@ class _Progress:
         )
         self._bar.update(finished + failed)
 
+    def say(self, line: str) -> None:
+        """Prints a line above the bar (or alone, without one)."""
+        self._bar.write(line, file=self._stream)
+
     def close(self) -> None:
         """Closes the bar."""
         self._bar.close()
 
 
+@contextlib.contextmanager
+def _signals_stop_the_grid() -> Iterator[list[str]]:
+    """Makes SIGTERM raise the KeyboardInterrupt a Ctrl-C raises, so both stop the grid the
+    same way; yields the names of the signals received (in the main thread; elsewhere the
+    handlers stay as they are and the list stays empty).
+
+    The names are kept here because Ray re-raises an interrupt met inside its calls
+    without the exception's message.
+    """
+    received: list[str] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield received
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        received.append(signal.Signals(signum).name)
+        raise KeyboardInterrupt(received[-1])
+
+    before = {s: signal.signal(s, interrupt) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield received
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, handler)
+
+
 def _fan_out(
-    grid: Grid, cells: list[TrialCell], ctx: _Context, progress: _Progress
+    grid: Grid,
+    cells: list[TrialCell],
+    ctx: _Context,
+    progress: _Progress,
+    received: list[str],
 ) -> dict[str, TrialOutcome]:
-    """Runs `cells` as Ray trial tasks, each in its own placement group, collecting results
-    with `ray.wait` as they finish; a failed trial is recorded and the others go on."""
+    """Runs `cells` as Ray trial tasks, collecting results with `ray.wait` as they finish;
+    a failed trial is recorded and the others go on. `received` names the signals
+    received so far (the last one names an interrupt).
+
+    On an interrupt the trials in flight are stopped before their runs are marked KILLED:
+    a driver that connected to Ray itself disconnects, and Ray kills the tasks (and their
+    actors) of a driver that left; within a caller's Ray session they are cancelled.
+    Disconnecting is preferred because a `ray.cancel` that meets a task's reply on its way
+    back aborts the driver inside Ray ("Tried to complete task that was not pending").
+    """
     import ray
-    from ray.util.placement_group import remove_placement_group
 
     from workers.trial_task import run_trial_job
 
     task = ray.remote(run_trial_job)
     pending = deque(cells)
-    in_flight: dict[ray.ObjectRef, tuple[TrialCell, object]] = {}
+    in_flight: dict[ray.ObjectRef, tuple[TrialCell, object | None]] = {}
     outcomes: dict[str, TrialOutcome] = {}
     try:
         _run_tasks(grid, ctx, progress, task, pending, in_flight, outcomes)
-    except KeyboardInterrupt as exc:  # SIGINT, or SIGTERM turned into one by the CLI
-        for ref, (_, group) in in_flight.items():
-            ray.cancel(ref, force=True)
-            remove_placement_group(group)
-        name = str(exc) if str(exc).startswith("SIG") else "SIGINT"
+    except KeyboardInterrupt as exc:  # SIGINT or SIGTERM (_signals_stop_the_grid)
+        if ctx.owns_ray:
+            ray.shutdown()
+        else:
+            for ref in in_flight:
+                ray.cancel(ref, force=True)
+        name = received[-1] if received else "SIGINT"
         done = sum(o.status == "FINISHED" for o in outcomes.values())
         raise GridInterrupted(name, done, len(in_flight), len(pending)) from exc
     return outcomes
@@ -378,11 +426,18 @@ def _run_tasks(
     progress: _Progress,
     task: object,
     pending: deque[TrialCell],
-    in_flight: dict[object, tuple[TrialCell, object]],
+    in_flight: dict[object, tuple[TrialCell, object | None]],
     outcomes: dict[str, TrialOutcome],
 ) -> None:
     """The fan-out loop of `_fan_out`: keeps `reservation.concurrent` trial tasks in flight
-    and records each outcome as its task ends."""
+    and records each outcome as its task ends.
+
+    A trial with evaluator actors runs in a placement group of its own (its task and its
+    actors are placed together); one without is a plain task reserving `trial_cpus`, since
+    creating a group costs about 0.4 s. A trial whose task died with the machinery
+    (`RETRYABLE_ERRORS`: its worker, node or an evaluator actor lost) goes back to the
+    front of the queue, up to `max_retries` times.
+    """
     import ray
     from ray.util.placement_group import placement_group, remove_placement_group
     from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
@@ -391,28 +446,35 @@ def _run_tasks(
 
     cfg = grid.config
     reservation = ctx.reservation
+    retries: Counter[str] = Counter()
     while pending or in_flight:
         while pending and len(in_flight) < reservation.concurrent:
             cell = pending.popleft()
-            group = placement_group(reservation.bundles(), strategy="PACK")
-            ref = task.options(
-                num_cpus=reservation.trial_cpus,
-                max_retries=cfg.max_retries,
-                retry_exceptions=list(RETRYABLE_ERRORS),
-                scheduling_strategy=PlacementGroupSchedulingStrategy(
+            group = strategy = None
+            if reservation.evaluators:
+                group = placement_group(reservation.bundles(), strategy="PACK")
+                strategy = PlacementGroupSchedulingStrategy(
                     placement_group=group, placement_group_bundle_index=0
-                ),
+                )
+            ref = task.options(
+                num_cpus=reservation.trial_cpus, max_retries=0, scheduling_strategy=strategy
             ).remote(ctx.job(grid, cell))
             in_flight[ref] = (cell, group)
         done, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
         finished = failed = 0
         for ref in done:
             cell, group = in_flight.pop(ref)
+            if group is not None:
+                remove_placement_group(group)
             try:
                 outcome = ray.get(ref)
             except ray.exceptions.RayError as exc:
+                if isinstance(exc, RETRYABLE_ERRORS) and retries[cell.key] < cfg.max_retries:
+                    retries[cell.key] += 1
+                    progress.say(f"{cell.key}: {type(exc).__name__}; retry {retries[cell.key]}")
+                    pending.appendleft(cell)
+                    continue
                 outcome = _lost(ctx, grid.grid_id, cell, exc)
-            remove_placement_group(group)
             outcomes[cell.key] = outcome
             if outcome.status == "FINISHED":
                 finished += 1
@@ -512,10 +574,13 @@ def launch(
         if todo:
             warm_kernels()
         parent_run_id = _parent_run(client, experiment_id, grid)
-        ctx = _Context(uri, experiment_id, parent_run_id, root, client, specs, reservation)
+        ctx = _Context(
+            uri, experiment_id, parent_run_id, root, client, specs, reservation, started_ray
+        )
         view = _Progress(ctx, grid, len(grid.cells) - len(todo), progress, stream)
         try:
-            ran = _fan_out(grid, todo, ctx, view)
+            with _signals_stop_the_grid() as received:
+                ran = _fan_out(grid, todo, ctx, view, received)
         except BaseException as exc:
             if isinstance(exc, GridInterrupted):
                 exc.finished += len(finished)

@@ -41,7 +41,6 @@ def draw_linkage(
         if path.suffix.lower() == ".png":
             fig = _figure(batch, motion, int(valid[0]), title)
             fig.savefig(tmp, format="png", dpi=120)
-            _close(fig)
         else:
             frames = [_frame_image(_figure(batch, motion, int(k), title)) for k in valid]
             frames[0].save(
@@ -52,17 +51,16 @@ def draw_linkage(
 
 def _figure(batch, motion, k: int, title: str):
     """Returns a matplotlib figure of linkage 0 of `batch` at sample k."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Circle
 
     pos = motion.positions[0, :, :, :]
-    fig, ax = plt.subplots(figsize=(6, 6))
+    fig = Figure(figsize=(6, 6))  # no pyplot, no layout engine: fixed margins
+    ax = fig.add_axes((0.12, 0.09, 0.85, 0.84))
     finite = pos[np.isfinite(pos[:, :, 0])]
     lo, hi = finite.min(axis=0) - 1.5, finite.max(axis=0) + 1.5
     crank = batch.node_float[0, 4, 0]
-    ax.add_patch(plt.Circle((0, 0), crank, fill=False, ls=":", color="0.6"))
+    ax.add_patch(Circle((0, 0), crank, fill=False, ls=":", color="0.6"))
     foot = int(motion.foot[0])
     ax.plot(*pos[foot].T, "-x", color="tab:red", ms=4, lw=1, label="foot path")
     for b in range(int(batch.n_beams[0])):
@@ -84,7 +82,6 @@ def _figure(batch, motion, k: int, title: str):
     ax.set_ylabel("y (LEGO modules)")
     ax.set_title(title, fontsize=9)
     ax.legend(loc="upper right", fontsize=7)
-    fig.tight_layout()
     return fig
 
 
@@ -94,12 +91,5 @@ def _frame_image(fig):
 
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=72)
-    _close(fig)
     buf.seek(0)
     return Image.open(buf).convert("P", palette=Image.Palette.ADAPTIVE)
-
-
-def _close(fig) -> None:
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)

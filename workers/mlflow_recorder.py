@@ -7,7 +7,6 @@ from pathlib import Path
 
 from mlflow.entities import Metric
 from mlflow.tracking import MlflowClient
-from mlflow.utils.async_logging.run_operations import RunOperations
 
 ARTIFACT_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".json", ".png", ".gif", ".pt")
 """The trial files logged at the end; the checkpoint folder and (hidden) temporary files
@@ -22,13 +21,13 @@ class MlflowRecorder:
     """Logs a trial's per-iteration metrics and final files to an existing MLflow run.
 
     The first iteration's metrics are sent at once (the run shows progress from the
-    start); later ones are gathered and sent every `send_every_s` seconds as asynchronous
-    `log_batch` calls, so the write overlaps the next evaluations. One `log_batch` costs
-    about 8 ms of Python (SQLAlchemy) on a sqlite store whatever its size up to a few
-    hundred metrics, and it holds the GIL while the trial loop runs, so one per iteration
-    would slow every iteration (docs/grid.md, "Evaluator transport"). `flush` (called by
-    `log_artifacts`, and by the trial task when a trial fails) sends what is gathered and
-    waits for every write, raising if one failed.
+    start); later ones are gathered and sent every `send_every_s` seconds. One `log_batch`
+    costs about 8 ms of Python (SQLAlchemy) on a sqlite store whatever its size up to a
+    few hundred metrics, so one per iteration would slow every iteration (docs/grid.md,
+    "Metrics"). Sends are synchronous: MLflow's asynchronous writer thread polls its
+    queue and takes about 1 s to stop when the run ends, longer than a small trial.
+    `flush` (called by `log_artifacts`, and by the trial task when a trial fails) sends
+    what is gathered.
 
     Args:
         client: a client on the run's tracking URI.
@@ -42,7 +41,6 @@ class MlflowRecorder:
         self._send_every_s = send_every_s
         self._gathered: list[Metric] = []
         self._sent_at = -float("inf")  # the first iteration goes out at once
-        self._pending: list[RunOperations] = []
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
         """Gathers one iteration's metrics with `step = iteration`; sends when it is time."""
@@ -58,18 +56,11 @@ class MlflowRecorder:
         gathered, self._gathered = self._gathered, []
         self._sent_at = time.monotonic()
         for start in range(0, len(gathered), MAX_BATCH):
-            batch = gathered[start : start + MAX_BATCH]
-            operation = self._client.log_batch(self._run_id, metrics=batch, synchronous=False)
-            if operation is not None:
-                self._pending.append(operation)
+            self._client.log_batch(self._run_id, metrics=gathered[start : start + MAX_BATCH])
 
     def flush(self) -> None:
-        """Sends the gathered metrics and waits until every send is written (raises if one
-        failed)."""
+        """Sends the gathered metrics."""
         self._send()
-        pending, self._pending = self._pending, []
-        for operation in pending:
-            operation.wait()
 
     def log_artifacts(self, out_dir: Path) -> None:
         """Flushes the metrics, then logs the trial's result files in `out_dir` at the run's

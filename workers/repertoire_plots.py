@@ -167,10 +167,13 @@ def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> N
     bins = bin_columns(archive.columns)
     # RANDOM keeps a 2-D grid (MAP-LIS's by default): its paths are mapped as that grid's.
     chosen = select_paths(archive, approach if is_map_elites(approach) or not bins else "MAP-LIS")
-    fig = Figure(figsize=(8.0 if bins else 6.0, 4.0 if bins else 1.8), layout="constrained")
+    # Fixed axes, no layout engine: a layout pass costs more than the drawing itself.
     norm = loss_norm(archive.loss.to_numpy(dtype=float))
     if bins:
-        heat, paths = fig.subplots(1, 2)
+        fig = Figure(figsize=(8.0, 4.0))
+        heat = fig.add_axes((0.05, 0.08, 0.36, 0.82))
+        bar = fig.add_axes((0.43, 0.16, 0.012, 0.66))
+        paths = fig.add_axes((0.54, 0.08, 0.42, 0.82))
         space = space_of(approach, len(bins))
         rows, cols, side = fold_bins(archive[bins].to_numpy(), space.resolution)
         image = np.full((side, side), np.nan)
@@ -178,11 +181,12 @@ def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> N
         shown = heat.imshow(image, origin="lower", cmap=LOSS_CMAP, norm=norm)
         heat.set_title(f"{approach}: best loss per cell ({len(archive)} filled)", fontsize=8)
         heat.tick_params(labelsize=6)
-        fig.colorbar(shown, ax=heat, shrink=0.8, extend="max")
+        fig.colorbar(shown, cax=bar, extend="max").ax.tick_params(labelsize=6)
         paths.set_title(f"best path per region ({DOWNSAMPLED} x {DOWNSAMPLED})", fontsize=8)
         shape = (DOWNSAMPLED, DOWNSAMPLED)
     else:
-        paths = fig.subplots(1, 1)
+        fig = Figure(figsize=(6.0, 1.8))
+        paths = fig.add_axes((0.02, 0.04, 0.96, 0.8))
         paths.set_title(f"{approach}: {STRIP_PATHS} paths of the final population", fontsize=8)
         shape = (1, STRIP_PATHS)
     draw_paths(paths, chosen, shape, norm)

@@ -26,8 +26,11 @@ RETRYABLE_ERRORS: tuple[type[BaseException], ...] = (
     ray.exceptions.RayActorError,
     ray.exceptions.ActorUnavailableError,
     ray.exceptions.ObjectLostError,
+    ray.exceptions.WorkerCrashedError,
+    ray.exceptions.NodeDiedError,
 )
-"""Failures of the machinery, not of the trial: the run ends KILLED and Ray retries the task."""
+"""Failures of the machinery, not of the trial: a trial task that meets one ends its run
+KILLED and raises it; the driver then runs the trial again (`max_retries`)."""
 SPEC_PARAMS: tuple[str, ...] = (
     "approach",
     "fitness",
@@ -184,7 +187,8 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
     returned as is; an earlier attempt left RUNNING is marked KILLED. The trial resumes
     from its checkpoint in `job.out_dir` when one exists, replaying the checkpointed
     metrics into the new run. A trial error ends the run FAILED
-    and is returned, not raised; a lost actor ends it KILLED and is raised so Ray retries.
+    and is returned, not raised; a lost actor ends it KILLED and is raised so the driver
+    retries.
     A run that a resuming driver marked KILLED meanwhile is not marked FINISHED.
     """
     client = MlflowClient(job.tracking_uri)

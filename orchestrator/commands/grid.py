@@ -95,7 +95,6 @@ def run_grid(args: argparse.Namespace) -> int:
         driver.check_tracking_uri(driver.resolve_tracking_uri(grid.config.tracking_uri or None))
         print(driver.describe(grid, driver.dry_run_cluster(args.address)))
         return 0
-    previous = signal.signal(signal.SIGTERM, _interrupt)
     try:
         result = driver.launch(
             grid,
@@ -110,20 +109,12 @@ def run_grid(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 128 + int(getattr(signal, exc.signal_name))
-    finally:
-        signal.signal(signal.SIGTERM, previous)
     print(driver.summary(result, grid.config))
     print(
         f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."
     )
     print(f"Open the UI with:  linkevo ui{_ui_flag(result.tracking_uri)}")
     return 1 if result.failed else 0
-
-
-def _interrupt(signum: int, frame: object) -> None:
-    """Turns SIGTERM into the KeyboardInterrupt a Ctrl-C raises, so both leave the grid
-    the same way (in-flight trials cancelled and marked KILLED, the store consistent)."""
-    raise KeyboardInterrupt(signal.Signals(signum).name)
 
 
 def _resume_command(args: argparse.Namespace) -> str:
