@@ -5,6 +5,7 @@ from algorithms.ea import EvolutionaryAlgorithm
 from algorithms.factory import (
     APPROACHES,
     MAP_ELITES,
+    MULTI_OBJECTIVE,
     REPERTOIRE_APPROACHES,
     STUDY_APPROACHES,
     eval_fitness,
@@ -18,16 +19,24 @@ from algorithms.optimizer import BaseOptimizer, Optimizer
 from algorithms.pareto import crowding_distance, hypervolume_2d, non_dominated_ranks, select_nsga2
 from algorithms.population import PopulationOptimizer
 from algorithms.random_sampling import RandomSampling
-from algorithms.scoring import HV_REFERENCES, QD_OFFSETS, TWO_OBJECTIVE, scalar_loss
+from algorithms.scoring import (
+    HV_REFERENCES,
+    QD_OFFSETS,
+    SINGLE_FITNESSES,
+    TWO_OBJECTIVE,
+    scalar_loss,
+)
 from algorithms.selection import tournament
 
 __all__ = [
     "APPROACHES",
     "HV_REFERENCES",
     "MAP_ELITES",
+    "MULTI_OBJECTIVE",
     "NSGA2",
     "QD_OFFSETS",
     "REPERTOIRE_APPROACHES",
+    "SINGLE_FITNESSES",
     "STUDY_APPROACHES",
     "TWO_OBJECTIVE",
     "BaseOptimizer",

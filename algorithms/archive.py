@@ -6,6 +6,7 @@ from dataclasses import fields, replace
 
 import numpy as np
 
+from algorithms import scoring
 from algorithms.individuals import Individuals
 from sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
 
@@ -136,11 +137,11 @@ class GridArchive:
 
     def coverage(self) -> float:
         """Returns the filled fraction of the grid."""
-        return len(self) / self.n_cells
+        return scoring.coverage(len(self), self.n_cells)
 
     def qd_score(self, offset: float) -> float:
         """Returns the sum over filled cells of max(offset - loss, 0)."""
-        return float(np.sum(np.maximum(offset - self.losses(), 0.0)))
+        return scoring.qd_score(self.losses(), offset)
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """Returns the filled cells and their elites as npz-safe arrays."""

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sim.kernels import noalias_option
+from sim.kernels import NOALIAS
 
 LANES = 16
 """float32 lanes of one 512-bit vector: the batch is padded to a multiple of this."""
@@ -27,7 +27,7 @@ ROWS = 4
 
 _FLAGS = {"fastmath": {"contract", "reassoc"}, "error_model": "numpy", "cache": True}
 """Fused multiply-adds and reassociated sums (fixed per build, so still reproducible)."""
-_HELPER = {**_FLAGS, "_nrt": False, "forceinline": True, **noalias_option()}
+_HELPER = {**_FLAGS, "_nrt": False, "forceinline": True, **NOALIAS}
 """Helpers are inlined by LLVM with their arrays `noalias` (see `sim.kernels._JIT`), which
 lets LLVM keep each row's sums in registers."""
 

@@ -7,7 +7,7 @@ from algorithms.map_elites import MapElites
 from algorithms.nsga2 import NSGA2
 from algorithms.optimizer import Optimizer
 from algorithms.random_sampling import RandomSampling
-from algorithms.scoring import TWO_OBJECTIVE
+from algorithms.scoring import evaluated_fitness
 
 MAP_ELITES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
 """The MAP-Elites approaches of the study (each with its own descriptor grid)."""
@@ -17,6 +17,8 @@ APPROACHES: tuple[str, ...] = (*STUDY_APPROACHES, "RANDOM")
 """Every approach `make_optimizer` builds: the study's six and the RANDOM baseline."""
 REPERTOIRE_APPROACHES: tuple[str, ...] = (*MAP_ELITES, "RANDOM")
 """Approaches that keep a repertoire (an archive on a grid) rather than a population."""
+MULTI_OBJECTIVE: tuple[str, ...] = ("NSGA2",)
+"""Approaches that optimise the two-objective variant of their fitness."""
 _OPTIONS: dict[str, tuple[str, ...]] = {
     "EA": ("coverage_space", "initial_sigma"),
     "NSGA2": ("coverage_space", "initial_sigma"),
@@ -29,7 +31,7 @@ _OPTIONS: dict[str, tuple[str, ...]] = {
 
 def eval_fitness(approach: str, fitness: str) -> str:
     """Returns the `sim.evaluate` fitness an approach needs: "Fp2"/"Fsl2" for NSGA2."""
-    return TWO_OBJECTIVE[fitness] if approach == "NSGA2" else fitness
+    return evaluated_fitness(fitness, approach in MULTI_OBJECTIVE)
 
 
 def make_optimizer(

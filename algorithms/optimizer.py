@@ -10,12 +10,9 @@ import numpy as np
 from algorithms.individuals import Individuals
 from algorithms.mutation import initial_sigma, mutate, n_sigmas
 from algorithms.rng_state import decode_rng, encode_rng
-from algorithms.scoring import QD_OFFSETS, TWO_OBJECTIVE, scalar_loss
+from algorithms.scoring import QD_OFFSETS, SINGLE_FITNESSES, evaluated_fitness, scalar_loss
 from sim.evaluation import Evaluation
 from sim.genome import random_genomes
-
-SINGLE_FITNESSES: tuple[str, ...] = ("Fp", "Fsl")
-"""The fitness functions a trial optimises (NSGA-II evaluates their two-objective variants)."""
 
 
 class Optimizer(Protocol):
@@ -132,7 +129,7 @@ class BaseOptimizer:
     @property
     def eval_fitness(self) -> str:
         """The `sim.evaluate` fitness name: the two-objective variant for NSGA-II."""
-        return TWO_OBJECTIVE[self.fitness] if self.multi_objective else self.fitness
+        return evaluated_fitness(self.fitness, self.multi_objective)
 
     @property
     def evaluations(self) -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from algorithms import scoring
 from algorithms.archive import elite_rows
 from algorithms.individuals import Individuals
 from algorithms.optimizer import BaseOptimizer
@@ -60,8 +61,8 @@ class PopulationOptimizer(BaseOptimizer):
         best = loss[elite_rows(cells, loss)]
         return {
             "mean_loss": float(np.mean(loss)),
-            "coverage": best.size / space.n_cells,
-            "qd_score": float(np.sum(np.maximum(self.qd_offset - best, 0.0))),
+            "coverage": scoring.coverage(best.size, space.n_cells),
+            "qd_score": scoring.qd_score(best, self.qd_offset),
         }
 
     def _state(self) -> dict[str, np.ndarray]:

@@ -27,11 +27,10 @@ import pandas as pd
 
 REPO = Path(__file__).resolve().parent.parent
 os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
-sys.path.insert(0, str(REPO / "tests" / "orchestrator"))
-
-from report_fixtures import GridSpec, store_uri, write_grid  # noqa: E402
+sys.path.insert(0, str(REPO))  # for tests.helpers
 
 from orchestrator.report import build_report, load_grid  # noqa: E402
+from tests.helpers.report import GridSpec, store_uri, write_grid  # noqa: E402
 
 APPROACHES = ("EA", "NSGA-II", "MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
 METRICS = ("evaluations", "best_loss", "mean_loss", "coverage", "qd_score", "hypervolume")

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from algorithms.factory import APPROACHES, STUDY_APPROACHES
-from algorithms.optimizer import SINGLE_FITNESSES
+from algorithms.scoring import SINGLE_FITNESSES
 from orchestrator.cli import CliError
 from sim.evaluation import MODES
 

@@ -8,12 +8,14 @@ from typing import Literal
 
 import numpy as np
 
+from sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
+
 Mode = Literal["paper", "legacy"]
 MODES: tuple[str, ...] = ("paper", "legacy")
 Fitness = Literal["Fp", "Fsl", "Fp2", "Fsl2"]
 FITNESSES: tuple[str, ...] = ("Fp", "Fsl", "Fp2", "Fsl2")
-DESCRIPTOR_WIDTHS: dict[str, int] = {"MAP-WH": 2, "MAP-LIS": 2, "MAP-ST": 4}
-"""Columns of each approach's continuous descriptor array."""
+DESCRIPTOR_WIDTHS: dict[str, int] = {name: DESCRIPTOR_SPACES[name].dims for name in COVERAGE_SPACES}
+"""Columns of each descriptor array `sim.evaluate` computes, by approach."""
 ALIGNMENT = 64
 """Byte alignment of each array laid out in a shared buffer (a cache line)."""
 

@@ -15,6 +15,7 @@ import numpy as np
 from algorithms import (
     APPROACHES,
     REPERTOIRE_APPROACHES,
+    SINGLE_FITNESSES,
     Optimizer,
     eval_fitness,
     make_optimizer,
@@ -28,8 +29,6 @@ from workers.evaluators import Evaluator, resolve_target
 from workers.recorders import MetricsCsv, Recorder
 from workers.repertoire_plots import draw_trial_maps
 
-TRIAL_FITNESSES: tuple[str, ...] = ("Fp", "Fsl")
-"""The fitness functions a trial optimises."""
 CHECKPOINT_DIR = "checkpoint"
 METRICS_FILE = "metrics.csv"
 SETTINGS_FILE = "settings.json"
@@ -95,8 +94,8 @@ class TrialSpec:
 
         if self.approach not in APPROACHES:
             fail(f"unknown approach {self.approach!r}; allowed: {', '.join(APPROACHES)}")
-        if self.fitness not in TRIAL_FITNESSES:
-            fail(f"unknown fitness {self.fitness!r}; allowed: {', '.join(TRIAL_FITNESSES)}")
+        if self.fitness not in SINGLE_FITNESSES:
+            fail(f"unknown fitness {self.fitness!r}; allowed: {', '.join(SINGLE_FITNESSES)}")
         if self.mode not in MODES:
             fail(f"unknown mode {self.mode!r}; allowed: {', '.join(MODES)}")
         if not _is_int(self.batch_size) or self.batch_size < 1:

@@ -6,10 +6,10 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from hexapod_fixtures import TEST_IDS, raw_config, toml_text
 
 from hardware.config import RobotConfig, parse_config
 from hardware.emulator import BusEmulator
+from tests.helpers.hexapod import TEST_IDS, raw_config, toml_text
 
 
 @pytest.fixture

@@ -11,11 +11,11 @@ import time
 from pathlib import Path
 
 import pytest
-from hexapod_fixtures import TEST_IDS
 
 from hardware import control_table as ct
 from hardware.config import GaitConfig
 from orchestrator.cli import main
+from tests.helpers.hexapod import TEST_IDS
 
 LINKEVO = Path(sys.executable).parent / "linkevo"
 

@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 import pytest
-from hexapod_fixtures import TEST_IDS
 
 from hardware import control_table as ct
 from hardware import protocol as p
@@ -28,6 +27,7 @@ from hardware.errors import (
 from hardware.gait import leg_phase, phase_separation, wrap
 from hardware.hexapod import Hexapod
 from hardware.session import run_walk
+from tests.helpers.hexapod import TEST_IDS
 
 PHASE_TOLERANCE_DEG = 5.0
 """Tripods must stay within this of half a turn apart (and each leg of its own tripod)."""

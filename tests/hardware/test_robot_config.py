@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from hexapod_fixtures import raw_config, toml_text
 
 from hardware.config import load_config, parse_config
 from hardware.errors import ConfigError
+from tests.helpers.hexapod import raw_config, toml_text
 
 REPO = Path(__file__).resolve().parents[2]
 

@@ -6,10 +6,10 @@ import threading
 import time
 
 import pytest
-from grid_helpers import runs_by_key, tiny_grid
 from mlflow.tracking import MlflowClient
 
 from orchestrator.driver import launch
+from tests.helpers.grid import runs_by_key, tiny_grid
 from workers.tracking import ensure_experiment
 
 pytestmark = pytest.mark.ray

@@ -14,12 +14,12 @@ import urllib.request
 from pathlib import Path
 
 import pytest
-from grid_helpers import runs_by_key, tiny_grid
 from mlflow.tracking import MlflowClient
 
 from orchestrator.config import ConfigError
 from orchestrator.driver import launch, summary, trial_dir, work_root
 from orchestrator.grid import CODE_VERSION_ENV
+from tests.helpers.grid import runs_by_key, tiny_grid
 from workers.tracking import ensure_experiment
 
 pytestmark = pytest.mark.ray

@@ -6,9 +6,9 @@ import socket
 
 import pytest
 import ray
-from grid_helpers import tiny_config_file
 
 from orchestrator.cli import main
+from tests.helpers.grid import tiny_config_file
 
 
 def closed_port() -> int:

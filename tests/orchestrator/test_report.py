@@ -16,7 +16,6 @@ import pandas as pd
 import pytest
 from mlflow.tracking import MlflowClient
 from PIL import Image
-from report_fixtures import GridSpec, write_grid
 from scipy.stats import mannwhitneyu
 
 from orchestrator.cli import main
@@ -24,6 +23,7 @@ from orchestrator.report import build_report, load_grid
 from orchestrator.report import figures as fig
 from orchestrator.report.findings import NOT_TESTABLE, REPRODUCED, check_findings
 from orchestrator.report.stats import holm, pairwise_tests
+from tests.helpers.report import GridSpec, write_grid
 
 SPEC = GridSpec(
     grid_id="g0report",

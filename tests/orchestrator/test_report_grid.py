@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pandas as pd
 import pytest
-from grid_helpers import tiny_grid
 from mlflow.tracking import MlflowClient
 
 from orchestrator.driver import launch, trial_dir, work_root
 from orchestrator.report import build_report
+from tests.helpers.grid import tiny_grid
 
 pytestmark = pytest.mark.ray
 

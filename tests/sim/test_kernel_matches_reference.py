@@ -173,7 +173,7 @@ def test_helpers_compile_inlined_with_noalias_arrays():
     back, silently, to the slower build (equal outputs), and this would say so."""
     from sim import kernels
 
-    assert kernels.noalias_option() == {"_noalias": True}
+    assert kernels.NOALIAS == {"_noalias": True}
     assert kernels._JIT["_noalias"] and kernels._JIT["forceinline"]
     assert kernels.place_triangle.targetoptions["_noalias"]
 
