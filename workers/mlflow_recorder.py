@@ -24,8 +24,9 @@ class MlflowRecorder:
     start); later ones are gathered and sent every `send_every_s` seconds. One `log_batch`
     costs about 8 ms of Python (SQLAlchemy) on a sqlite store whatever its size up to a
     few hundred metrics, so one per iteration would slow every iteration (docs/grid.md,
-    "Metrics"). Sends are synchronous: MLflow's asynchronous writer thread polls its
-    queue and takes about 1 s to stop when the run ends, longer than a small trial.
+    "Metrics go to MLflow every 2 s"). Sends are synchronous: MLflow's asynchronous
+    writer thread polls its queue and takes about 1 s to stop when the run ends, longer
+    than a small trial.
     `flush` (called by `log_artifacts`, and by the trial task when a trial fails) sends
     what is gathered.
 

@@ -8,7 +8,7 @@ import os
 import tempfile
 from pathlib import Path
 
-from algorithms import APPROACHES
+from algorithms import APPROACHES, SINGLE_FITNESSES
 from orchestrator.cli import CliError
 from sim.evaluation import MODES
 from workers.checkpoint import CheckpointError
@@ -17,7 +17,6 @@ from workers.recorders import ProgressRecorder
 from workers.trial import (
     CHECKPOINT_DIR,
     METRICS_FILE,
-    TRIAL_FITNESSES,
     TrialSpec,
     TrialSpecError,
     build_optimizer,
@@ -36,7 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         ),
     )
     parser.add_argument("--approach", required=True, help=f"one of {', '.join(APPROACHES)}")
-    parser.add_argument("--fitness", required=True, help=f"one of {', '.join(TRIAL_FITNESSES)}")
+    parser.add_argument("--fitness", required=True, help=f"one of {', '.join(SINGLE_FITNESSES)}")
     parser.add_argument(
         "--evaluations", required=True, type=int, help="evaluation budget (>= batch size)"
     )
