@@ -412,8 +412,12 @@ def _fan_out(
         if ctx.owns_ray:
             ray.shutdown()
         else:
-            for ref in in_flight:
+            from ray.util.placement_group import remove_placement_group
+
+            for ref, (_, group) in in_flight.items():
                 ray.cancel(ref, force=True)
+                if group is not None:
+                    remove_placement_group(group)
         name = received[-1] if received else "SIGINT"
         done = sum(o.status == "FINISHED" for o in outcomes.values())
         raise GridInterrupted(name, done, len(in_flight), len(pending)) from exc
