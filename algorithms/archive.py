@@ -1,14 +1,22 @@
-"""Provides GridArchive: a vectorised MAP-Elites grid that keeps the lowest loss per cell."""
+"""Provides GridArchive: the MAP-Elites repertoire, a pyribs `GridArchive` with the published
+binning, holding the lowest loss per cell."""
 
 from __future__ import annotations
 
 from dataclasses import fields, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from algorithms import scoring
 from algorithms.individuals import Individuals
 from sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
+
+if TYPE_CHECKING:
+    from algorithms.ribs_grid import PublishedGrid
+
+_RIBS_NAMES = {"genome": "solution", "loss": "objective", "desc": "measures"}
+"""Individuals fields that pyribs stores under its own names (the rest are extra fields)."""
 
 
 def elite_rows(cells: np.ndarray, loss: np.ndarray) -> np.ndarray:
@@ -31,14 +39,13 @@ def elite_rows(cells: np.ndarray, loss: np.ndarray) -> np.ndarray:
 
 
 class GridArchive:
-    """A grid over a descriptor space holding at most one elite (the lowest loss) per cell.
+    """The repertoire: at most one elite (the lowest loss) per cell of a descriptor grid.
 
-    Storage is dense: one row per cell (`data`), with an occupancy mask, so an insertion
-    costs O(batch), not O(archive). Per batch, the best child of each cell is found with one
-    `np.lexsort` (ties: the earlier child) and written where the cell is empty or the child's
-    loss is strictly lower (ties keep the incumbent). So an empty cell takes a child, a
-    better child replaces the elite, and of two children for one cell in one batch the
-    better survives. Rows with a non-finite loss are refused.
+    Insertion is pyribs' (`PublishedGrid.add`): a child takes its cell when the cell is
+    empty or its loss is strictly lower (ties keep the incumbent), and of several children
+    for one cell in one batch the best (ties: the earlier) is the candidate. Rows with a
+    non-finite loss or descriptor are refused. Everything read back is in ascending cell
+    order, so the same seed draws the same parents.
 
     Args:
         space: the descriptor space (names, resolution, step) and its published binning.
@@ -46,8 +53,8 @@ class GridArchive:
 
     def __init__(self, *, space: DescriptorSpace) -> None:
         self._space = space
-        self._occupied = np.zeros(space.n_cells, dtype=bool)
-        self._data: Individuals | None = None
+        self._grid: PublishedGrid | None = None  # made by the first add, which fixes S and A
+        self._cells: np.ndarray | None = None  # `cells`, until the next insertion
 
     @property
     def space(self) -> DescriptorSpace:
@@ -60,24 +67,38 @@ class GridArchive:
         return self._space.n_cells
 
     @property
-    def data(self) -> Individuals | None:
-        """The dense storage, one row per cell (rows of empty cells are meaningless)."""
-        return self._data
-
-    @property
     def cells(self) -> np.ndarray:
         """(K,) int64 index of every filled cell, ascending."""
-        return np.flatnonzero(self._occupied)
+        if self._cells is None:
+            filled = self._grid.data("index") if self._grid is not None else np.zeros(0)
+            self._cells = np.sort(filled).astype(np.int64)
+        return self._cells
 
     @property
     def elites(self) -> Individuals | None:
         """The elites (K rows, in `cells` order), or None while the archive is empty."""
-        if self._data is None or not self._occupied.any():
+        if not len(self):
             return None
-        return self._data.take(self.cells)
+        return Individuals(**self.columns(*(f.name for f in fields(Individuals))))
+
+    def columns(self, *names: str, rows: np.ndarray | None = None) -> dict[str, np.ndarray]:
+        """Returns named `Individuals` fields of the elites: {name: (K, ...)} in `cells` order.
+
+        Args:
+            names: field names of `Individuals`.
+            rows: (M,) positions in `cells` to read instead of all K (repeats allowed).
+        """
+        if self._grid is None:
+            raise RuntimeError("the archive is empty")
+        cells = self.cells if rows is None else self.cells[rows]
+        data = self._grid.at(cells, [_RIBS_NAMES.get(n, n) for n in names])
+        columns = {n: data[_RIBS_NAMES.get(n, n)] for n in names}
+        if "loss" in columns:
+            columns["loss"] = -columns["loss"]
+        return columns
 
     def __len__(self) -> int:
-        return int(np.count_nonzero(self._occupied))
+        return 0 if self._grid is None else len(self._grid)
 
     def bins(self, desc: np.ndarray) -> np.ndarray:
         """Returns the published bins of continuous descriptors, (N, D) -> (N, D) int64."""
@@ -88,19 +109,31 @@ class GridArchive:
         return cell_index(self.bins(desc), self._space)
 
     def add(self, batch: Individuals) -> int:
-        """Inserts a batch; returns how many of its rows became elites.
+        """Inserts a batch; returns how many cells got a new elite.
 
         Args:
             batch: N candidates with (N,) losses and (N, D) descriptors.
         """
-        cells = self.cell_index(batch.desc)
-        rows = elite_rows(cells, batch.loss)
-        cells = cells[rows]
-        if self._data is None:
-            self._data = _allocate(batch, self.n_cells)
-        wins = ~self._occupied[cells] | (batch.loss[rows] < self._data.loss[cells])
-        self._write(cells[wins], batch, rows[wins])
-        return int(np.count_nonzero(wins))
+        keep = np.isfinite(batch.loss) & np.isfinite(batch.desc).all(axis=1)
+        if not keep.any():
+            return 0
+        if self._grid is None:
+            # pyribs imports torch and scikit-learn (about 3 s), so it is loaded by the first
+            # insertion: the CLI, config checks and the other approaches do not pay for it.
+            from algorithms.ribs_grid import PublishedGrid
+
+            self._grid = PublishedGrid(
+                space=self._space,
+                sigma_width=batch.sigma.shape[1],
+                path_length=batch.foot_x.shape[1],
+            )
+        kept = batch if keep.all() else batch.take(np.flatnonzero(keep))
+        self._cells = None
+        status = self._grid.add(
+            **{_RIBS_NAMES.get(f.name, f.name): getattr(kept, f.name) for f in fields(kept)}
+            | {"objective": -kept.loss}
+        )["status"]
+        return int(np.unique(self._grid.index_of(kept.desc[status > 0])).size)
 
     def reindex(self, desc: np.ndarray) -> int:
         """Re-inserts every elite under new descriptors; returns how many were dropped.
@@ -116,24 +149,17 @@ class GridArchive:
             return 0
         if desc.shape[0] != len(elites):
             raise ValueError(f"reindex needs {len(elites)} descriptor rows, got {desc.shape[0]}")
-        moved = replace(elites, desc=np.asarray(desc, dtype=np.float64))
-        cells = self.cell_index(moved.desc)
-        rows = elite_rows(cells, moved.loss)
-        self._occupied[:] = False
-        self._write(cells[rows], moved, rows)
-        return len(elites) - len(rows)
-
-    def _write(self, cells: np.ndarray, source: Individuals, rows: np.ndarray) -> None:
-        assert self._data is not None
-        for f in fields(Individuals):
-            getattr(self._data, f.name)[cells] = getattr(source, f.name)[rows]
-        self._occupied[cells] = True
+        assert self._grid is not None
+        self._grid.clear()
+        self._cells = None
+        self.add(replace(elites, desc=np.asarray(desc, dtype=np.float64)))
+        return len(elites) - len(self)
 
     def losses(self) -> np.ndarray:
-        """Returns the (K,) losses of the elites, in `cells` order (no copy of the rest)."""
-        if self._data is None:
+        """Returns the (K,) losses of the elites, in `cells` order."""
+        if not len(self):
             return np.zeros(0)
-        return self._data.loss[self._occupied]
+        return self.columns("loss")["loss"]
 
     def coverage(self) -> float:
         """Returns the filled fraction of the grid."""
@@ -152,20 +178,19 @@ class GridArchive:
         return state
 
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
-        """Restores the contents saved by `state_dict`."""
+        """Restores the contents saved by `state_dict`.
+
+        Raises:
+            ValueError: when the saved elites do not bin to the saved cells (a state of
+                another descriptor space).
+        """
         cells = np.asarray(state["archive.cells"], dtype=np.int64)
-        self._occupied[:] = False
-        self._data = None
+        self._grid = None
+        self._cells = None
         if cells.size:
-            elites = Individuals.from_state(state, "archive")
-            self._data = _allocate(elites, self.n_cells)
-            self._write(cells, elites, np.arange(cells.size))
-
-
-def _allocate(like: Individuals, n: int) -> Individuals:
-    return Individuals(
-        **{
-            f.name: np.zeros((n, *getattr(like, f.name).shape[1:]), getattr(like, f.name).dtype)
-            for f in fields(Individuals)
-        }
-    )
+            self.add(Individuals.from_state(state, "archive"))
+            if not np.array_equal(self.cells, cells):
+                raise ValueError(
+                    f"the saved elites do not bin to their saved cells in the "
+                    f"{'/'.join(self._space.names)} grid"
+                )

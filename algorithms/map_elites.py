@@ -57,12 +57,11 @@ class MapElites(BaseOptimizer):
         return self._archive.reindex(desc)
 
     def _parents(self) -> tuple[np.ndarray, np.ndarray]:
-        cells = self._archive.cells
-        data = self._archive.data
-        if data is None or cells.size == 0:
+        if not len(self._archive):
             raise RuntimeError("the repertoire is empty: no batch had a finite loss")
-        pick = cells[self._rng.integers(0, cells.size, size=self.batch_size)]
-        return data.genome[pick], data.sigma[pick]
+        pick = self._rng.integers(0, len(self._archive), size=self.batch_size)
+        parents = self._archive.columns("genome", "sigma", rows=pick)
+        return parents["genome"], parents["sigma"]
 
     def _survive(self, batch: Individuals, *, initial: bool) -> None:
         self._archive.add(batch)

@@ -82,3 +82,45 @@ def test_state_dict_round_trip(archive: GridArchive) -> None:
     copy.load_state_dict(archive.state_dict())
     np.testing.assert_array_equal(copy.cells, archive.cells)
     np.testing.assert_array_equal(copy.elites.genome, archive.elites.genome)
+
+
+def test_the_repertoire_is_a_pyribs_archive_with_the_published_bins(archive: GridArchive) -> None:
+    from ribs.archives import GridArchive as RibsGridArchive
+
+    edges = np.array([[0.1, 0.5], [0.1000001, 0.5000001], [9.9, 49.5], [10.0, 50.0]])
+    archive.add(batch([1.0, 2.0, 3.0, 4.0], edges))
+    assert isinstance(archive._grid, RibsGridArchive)
+    # A value on an edge belongs to the bin below it (v > i*step counts i).
+    np.testing.assert_array_equal(archive.bins(edges), [[0, 0], [1, 1], [98, 98], [99, 99]])
+    assert archive.cells.tolist() == [0, 101, 98 * 100 + 98, 99 * 100 + 99]
+
+
+def test_insertion_matches_a_plain_per_child_archive(archive: GridArchive) -> None:
+    """Random batches with repeated losses and edge values, against a dict archive."""
+    rng = np.random.default_rng(5)
+    plain: dict[int, tuple[float, float]] = {}  # cell -> (loss, tag)
+    for step in range(12):
+        n = 300
+        desc = rng.integers(0, 12, size=(n, 2)) * np.array([0.1, 0.5])
+        desc += rng.choice([0.0, 0.05], size=(n, 2))  # half of the values sit on an edge
+        loss = rng.integers(0, 6, size=n).astype(float)
+        loss[rng.random(n) < 0.05] = np.nan
+        genome_tag = step + np.arange(n) / 1000
+        child = batch(loss.tolist(), desc.tolist())
+        child = Individuals(**{**child.__dict__, "genome": np.repeat(genome_tag[:, None], 56, 1)})
+        for cell, value, tag in zip(archive.cell_index(desc), loss, genome_tag, strict=True):
+            if np.isfinite(value) and (cell not in plain or value < plain[cell][0]):
+                plain[int(cell)] = (float(value), float(tag))
+        archive.add(child)
+        assert archive.cells.tolist() == sorted(plain)
+        np.testing.assert_array_equal(archive.elites.loss, [plain[c][0] for c in sorted(plain)])
+        np.testing.assert_array_equal(
+            archive.elites.genome[:, 0], [plain[c][1] for c in sorted(plain)]
+        )
+
+
+def test_a_state_of_another_grid_is_refused(archive: GridArchive) -> None:
+    archive.add(batch([3.0, 1.0], [[1, 1], [2, 2]]))
+    other = GridArchive(space=DESCRIPTOR_SPACES["MAP-WH"])
+    with pytest.raises(ValueError, match="do not bin to their saved cells in the height/width"):
+        other.load_state_dict(archive.state_dict())
