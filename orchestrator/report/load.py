@@ -145,12 +145,12 @@ def load_grid(
     grid_id, parent_id = find_grid_run(client, grid_id, experiment)
     runs = search_trial_runs(client, grid_id, experiment)
     parent = client.get_run(parent_id)
-    config = _grid_config(parent, cache_dir)
+    config = _grid_config(parent, cache_dir, tracking_uri)
     runs = _latest_per_trial(runs)
     with ThreadPoolExecutor(DOWNLOAD_THREADS) as pool:
         fetched = list(
             pool.map(
-                lambda row: _fetch_trial(client, row, cache_dir),
+                lambda row: _fetch_trial(client, row, cache_dir, tracking_uri),
                 [row for _, row in runs.iterrows()],
             )
         )
@@ -199,9 +199,9 @@ def search_trial_runs(client, grid_id: str, experiment: str) -> pd.DataFrame:
     return pd.DataFrame.from_records(records)
 
 
-def _grid_config(parent, cache_dir: Path) -> dict:
+def _grid_config(parent, cache_dir: Path, tracking_uri: str) -> dict:
     """Returns the parent run's `grid_config.json`, else its params as a flat dict."""
-    path = _artefact(parent.info.artifact_uri, "grid_config.json", cache_dir / "grid")
+    path = _artefact(parent.info.artifact_uri, "grid_config.json", cache_dir / "grid", tracking_uri)
     if path is not None:
         return json.loads(path.read_text())
     return dict(parent.data.params)
@@ -218,19 +218,19 @@ def _latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
 
 
 def _fetch_trial(
-    client, row: pd.Series, cache_dir: Path
+    client, row: pd.Series, cache_dir: Path, tracking_uri: str
 ) -> tuple[pd.DataFrame, Path | None, Path | None]:
     """Returns (metric history, local archive path, local best-linkage path) of one trial
     run; a path is None where the run has no such file."""
     folder = cache_dir / row.run_id
-    csv = _artefact(row.artifact_uri, "metrics.csv", folder)
+    csv = _artefact(row.artifact_uri, "metrics.csv", folder, tracking_uri)
     history = pd.read_csv(csv) if csv is not None else _history_from_metrics(client, row)
     archive = None
     for name in ARCHIVE_FILES:
-        archive = _artefact(row.artifact_uri, name, folder)
+        archive = _artefact(row.artifact_uri, name, folder, tracking_uri)
         if archive is not None:
             break
-    return history, archive, _artefact(row.artifact_uri, BEST_JSON, folder)
+    return history, archive, _artefact(row.artifact_uri, BEST_JSON, folder, tracking_uri)
 
 
 def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
@@ -238,7 +238,7 @@ def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
     names = [c.removeprefix("metrics.") for c in row.index if c.startswith("metrics.")]
     series = {}
     for name in names:
-        if name in HISTORY_COLUMNS and pd.notna(row[f"metrics.{name}"]):
+        if name in HISTORY_COLUMNS[1:] and pd.notna(row[f"metrics.{name}"]):  # not iteration
             points = client.get_metric_history(row.run_id, name)
             series[name] = pd.Series({m.step: m.value for m in points}, dtype=float)
     if not series:
@@ -247,10 +247,11 @@ def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
     return table.rename_axis("iteration").reset_index()
 
 
-def _artefact(artifact_uri: str, name: str, folder: Path) -> Path | None:
+def _artefact(artifact_uri: str, name: str, folder: Path, tracking_uri: str) -> Path | None:
     """Returns a local path to artefact `name` of a run, or None when it has none.
 
-    A `file:` artefact root is read in place; any other is downloaded into `folder`.
+    A `file:` artefact root is read in place; any other is downloaded into `folder`
+    (a server's proxied `mlflow-artifacts:` root through `tracking_uri`).
     """
     parsed = urlparse(artifact_uri)
     if parsed.scheme in ("file", ""):
@@ -261,7 +262,11 @@ def _artefact(artifact_uri: str, name: str, folder: Path) -> Path | None:
 
     folder.mkdir(parents=True, exist_ok=True)
     try:
-        return Path(download_artifacts(artifact_uri=f"{artifact_uri}/{name}", dst_path=folder))
+        return Path(
+            download_artifacts(
+                artifact_uri=f"{artifact_uri}/{name}", dst_path=folder, tracking_uri=tracking_uri
+            )
+        )
     except (MlflowException, OSError):
         return None
 

@@ -53,3 +53,20 @@ def runs_by_key(uri: str, grid_id: str) -> dict[str, list[tuple[str, str]]]:
     for run in runs:
         out[run.data.tags["trial_key"]].append((run.info.run_id, run.info.status))
     return out
+
+
+def running_on(uri: str, grid_id: str, node_id: str) -> str | None:
+    """Returns the key of a trial running on `node_id` that has logged an iteration."""
+    client = MlflowClient(uri)
+    experiment = client.get_experiment_by_name("linkevo")
+    if experiment is None:
+        return None
+    runs = client.search_runs(
+        [experiment.experiment_id],
+        f"tags.grid_id = '{grid_id}' and attributes.status = 'RUNNING' "
+        f"and tags.ray_node = '{node_id}'",
+    )
+    for run in runs:
+        if "evaluations" in run.data.metrics:
+            return run.data.tags["trial_key"]
+    return None

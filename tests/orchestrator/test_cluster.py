@@ -6,10 +6,9 @@ import threading
 import time
 
 import pytest
-from mlflow.tracking import MlflowClient
 
 from orchestrator.driver import launch
-from tests.helpers.grid import runs_by_key, tiny_grid
+from tests.helpers.grid import running_on, runs_by_key, tiny_grid
 from workers.tracking import ensure_experiment
 
 pytestmark = pytest.mark.ray
@@ -30,21 +29,6 @@ def cluster():
     yield nodes, workers
     ray.shutdown()
     nodes.shutdown()
-
-
-def running_on(uri: str, grid_id: str, node_id: str) -> str | None:
-    """Returns the key of a trial running on `node_id` that has logged an iteration."""
-    client = MlflowClient(uri)
-    experiment = client.get_experiment_by_name("linkevo")
-    runs = client.search_runs(
-        [experiment.experiment_id],
-        f"tags.grid_id = '{grid_id}' and attributes.status = 'RUNNING' "
-        f"and tags.ray_node = '{node_id}'",
-    )
-    for run in runs:
-        if "evaluations" in run.data.metrics:
-            return run.data.tags["trial_key"]
-    return None
 
 
 def test_grid_survives_removing_a_worker_node(cluster, tmp_path):
