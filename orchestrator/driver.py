@@ -314,6 +314,7 @@ class _Progress:
         self._start = time.monotonic()
         self._last_poll = 0.0
         self._rate = 0.0
+        self._ended_evaluations = 0.0
         self.failed = 0
         self._bar = tqdm(
             total=len(grid.cells),
@@ -326,13 +327,21 @@ class _Progress:
         )
 
     def _poll_rate(self) -> None:
-        runs = trial_runs(self._ctx.client, self._ctx.experiment_id, self._grid_id)
-        evaluations = sum(
+        # Only the runs in flight are read: reading the whole grid every poll costs time
+        # in proportion to the grid on the tracking server (docs/scale.md).
+        runs = trial_runs(
+            self._ctx.client, self._ctx.experiment_id, self._grid_id, status="RUNNING"
+        )
+        evaluations = self._ended_evaluations + sum(
             r.data.metrics.get("evaluations", 0.0)
             for r in runs
             if r.info.start_time >= self._start_ms
         )
         self._rate = evaluations / max(time.monotonic() - self._start, 1e-9)
+
+    def ended(self, outcome: TrialOutcome) -> None:
+        """Counts the evaluations of a trial that ended in this launch."""
+        self._ended_evaluations += outcome.evaluations or 0
 
     def update(self, running: int, finished: int, failed: int) -> None:
         """Refreshes the view; reads MLflow at most every PROGRESS_POLL_SECONDS."""
@@ -464,7 +473,9 @@ def _run_tasks(
                 num_cpus=reservation.trial_cpus, max_retries=0, scheduling_strategy=strategy
             ).remote(ctx.job(grid, cell))
             in_flight[ref] = (cell, group)
-        done, _ = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+        done, rest = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+        if done and rest:  # every trial that has ended, not one per pass
+            done += ray.wait(rest, num_returns=len(rest), timeout=0)[0]
         finished = failed = 0
         for ref in done:
             cell, group = in_flight.pop(ref)
@@ -480,6 +491,7 @@ def _run_tasks(
                     continue
                 outcome = _lost(ctx, grid.grid_id, cell, exc)
             outcomes[cell.key] = outcome
+            progress.ended(outcome)
             if outcome.status == "FINISHED":
                 finished += 1
             else:
