@@ -6,11 +6,15 @@ import math
 
 import numpy as np
 
-from sim.decode import BEAM_KINDS, NODE_KINDS, check_mode, decode
-from sim.genome import N_GENES, validate_genomes
-from sim.kinematics import DEFAULT_ANGLES, simulate
+from sim import kernels
+from sim.decode import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
+from sim.genome import MAX_BEAMS, N_GENES, N_NODES, validate_genomes
+from sim.kinematics import DEFAULT_ANGLES, Motion, check_angles, simulate
+from sim.physical import physical_checks
 
-FORMAT = "linkevo.linkage/1"
+FORMAT = "linkevo.linkage/2"
+"""Version 2 adds each node's and beam's topology, so a document rebuilds without its genome."""
+READABLE_FORMATS = ("linkevo.linkage/1", FORMAT)
 DEFAULT_UNIT_MM = 8.0
 """One length unit is one LEGO Technic module: 8 mm hole pitch."""
 
@@ -32,8 +36,13 @@ def to_document(
         unit_mm: millimetres per length unit (LEGO module).
         meta: free-form provenance (run id, approach, loss...) stored under "meta".
 
-    The document holds the genome, mode, units, the nodes at crank angle 0, the beams
-    (start, end, length in units and mm, kind), the crank, the foot and its path.
+    The document holds the genome, mode, units, the nodes at crank angle 0 with how each
+    is placed (`topology`: a triangle's anchors, lengths, assembly branch and backup
+    point; an extension's parent beam and inverted flag), the beams (start, end, kind,
+    length in units and mm, parent beam, root beam, inversions), the crank (motor, tip,
+    length, sense and sample angles), the foot and its path, and the physical checks
+    (`sim.physical`: full turn, transmission angle, toggles, stretch, size). `batch_from_document`
+    rebuilds the linkage from all that without the genome.
     """
     genomes = validate_genomes(np.asarray(genome, dtype=np.float64).reshape(1, -1))
     batch = decode(genomes, mode)
@@ -46,6 +55,7 @@ def to_document(
             "kind": NODE_KINDS[int(batch.node_kind[0, j])],
             "x": float(batch.positions0[0, j, 0]),
             "y": float(batch.positions0[0, j, 1]),
+            "topology": _node_topology(batch.node_int[0, j], batch.node_float[0, j]),
         }
         for j in range(batch.node_kind.shape[1])
     ]
@@ -57,6 +67,9 @@ def to_document(
             "kind": BEAM_KINDS[int(batch.beam_kind[0, b])],
             "length": float(batch.beam_length[0, b]),
             "length_mm": float(batch.beam_length[0, b] * unit_mm),
+            "parent": int(batch.beam_int[0, b, 3]),
+            "root": int(batch.beam_int[0, b, 4]),
+            "inversions": int(batch.beam_int[0, b, 5]),
         }
         for b in range(int(batch.n_beams[0]))
     ]
@@ -66,7 +79,15 @@ def to_document(
         "units": {"length": "LEGO module", "unit_mm": unit_mm, "angle": "rad"},
         "genome": genomes[0].tolist(),
         "n_angles": n_angles,
-        "crank": {"motor": 0, "tip": 4, "length": beams[0]["length"]},
+        "crank": {
+            "motor": 0,
+            "tip": 4,
+            "length": beams[0]["length"],
+            "sense": "counter-clockwise (x right, y up): the tip is at angle theta",
+            "angles": kernels.crank_angles(n_angles, mode == "legacy").tolist(),
+        },
+        "tolerance": kernels.TOL,
+        "checks": physical_checks(batch, motion).row(0),
         "foot": foot,
         "error": int(motion.error[0]),
         "nodes": nodes,
@@ -86,9 +107,7 @@ def from_document(doc: dict) -> tuple[np.ndarray, str]:
         ValueError: if the document is not a linkevo linkage document, or if the beams it
             lists differ from those its genome decodes to (edited or from another version).
     """
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise ValueError(f"not a linkage document: format is {found!r}, expected {FORMAT!r}")
+    _check_format(doc, READABLE_FORMATS)
     mode = doc.get("mode", "paper")
     check_mode(mode)
     genome = np.asarray(doc.get("genome"), dtype=np.float64)
@@ -101,3 +120,96 @@ def from_document(doc: dict) -> tuple[np.ndarray, str]:
     if stored.shape != rebuilt.shape or not np.allclose(stored, rebuilt, rtol=0, atol=1e-9):
         raise ValueError("document beams do not match its genome: edited or from another version")
     return genome, mode
+
+
+def batch_from_document(doc: dict) -> LinkageBatch:
+    """Returns the one-linkage LinkageBatch that a version-2 document describes, built from
+    its nodes and beams alone (the genome is not read).
+
+    Raises:
+        ValueError: when the document is not version 2 or a field is missing or out of range.
+    """
+    _check_format(doc, (FORMAT,))
+    mode = doc.get("mode", "paper")
+    check_mode(mode)
+    nodes, beams = doc.get("nodes", []), doc.get("beams", [])
+    if len(nodes) != N_NODES or not 1 <= len(beams) <= MAX_BEAMS:
+        raise ValueError(
+            f"a linkage document has {N_NODES} nodes and 1..{MAX_BEAMS} beams, "
+            f"got {len(nodes)} and {len(beams)}"
+        )
+    node_int = np.full((1, N_NODES, 4), -1, np.int64)
+    node_float = np.zeros((1, N_NODES, 5))
+    positions0 = np.zeros((1, N_NODES, 2))
+    for j, node in enumerate(nodes):
+        node_int[0, j], node_float[0, j] = _node_rows(node)
+        positions0[0, j] = node["x"], node["y"]
+    beam_int = np.full((1, MAX_BEAMS, 6), -1, np.int64)
+    beam_length = np.zeros((1, MAX_BEAMS))
+    for b, beam in enumerate(beams):
+        fields = (beam["start"], beam["end"], BEAM_KINDS.index(beam["kind"]), beam["parent"])
+        beam_int[0, b] = (*fields, beam["root"], beam["inversions"])
+        beam_length[0, b] = beam["length"]
+    return LinkageBatch(
+        mode=mode,
+        node_int=node_int,
+        node_float=node_float,
+        beam_int=beam_int,
+        beam_length=beam_length,
+        n_beams=np.array([len(beams)], np.int64),
+        positions0=positions0,
+    )
+
+
+def simulate_document(doc: dict, n_angles: int | None = None) -> Motion:
+    """Simulates the linkage of a version-2 document over `n_angles` crank angles (default:
+    the document's), from the document alone."""
+    return simulate(batch_from_document(doc), check_angles(n_angles or doc["n_angles"]))
+
+
+def _node_topology(ints: np.ndarray, floats: np.ndarray) -> dict:
+    """How a node is placed, from its decoded rows ints (4,) and floats (5,)."""
+    kind = NODE_KINDS[int(ints[0])]
+    if kind == "static":
+        return {"x": float(floats[0]), "y": float(floats[1])}
+    if kind == "crank":
+        return {"crank_length": float(floats[0])}
+    if kind == "triangle":
+        return {
+            "anchors": [int(ints[1]), int(ints[2])],
+            "lengths": [float(floats[0]), float(floats[1])],
+            "branch": int(ints[3]),  # 0: the intersection right of A -> C (x right, y up)
+            "backup_angle": float(floats[2]),
+            "backup_offset": [float(floats[3]), float(floats[4])],
+        }
+    if kind == "extension":
+        return {"parent_beam": int(ints[1]), "inverted": bool(ints[2]), "length": float(floats[0])}
+    return {}
+
+
+def _node_rows(node: dict) -> tuple[list[int], list[float]]:
+    """The decoded rows (4,) int and (5,) float of a document node (inverse of _node_topology)."""
+    kind = node["kind"]
+    if kind not in NODE_KINDS:
+        raise ValueError(f"unknown node kind {kind!r}; allowed: {', '.join(NODE_KINDS)}")
+    t = node.get("topology", {})
+    ints, floats = [NODE_KINDS.index(kind), -1, -1, -1], [0.0] * 5
+    if kind == "static":
+        floats[:2] = t["x"], t["y"]
+    elif kind == "crank":
+        floats[0] = t["crank_length"]
+    elif kind == "triangle":
+        ints[1:] = *t["anchors"], t["branch"]
+        floats[:] = *t["lengths"], t["backup_angle"], *t["backup_offset"]
+    elif kind == "extension":
+        ints[1:3] = t["parent_beam"], int(t["inverted"])
+        floats[0] = t["length"]
+    return ints, floats
+
+
+def _check_format(doc: object, allowed: tuple[str, ...]) -> None:
+    found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+    if found not in allowed:
+        raise ValueError(
+            f"not a readable linkage document: format is {found!r}, expected {' or '.join(allowed)}"
+        )

@@ -1,4 +1,6 @@
-"""Provides linkage references into MLflow: `RUN_ID` (a trial's best) or `RUN_ID:CELL`."""
+"""Provides linkage references into MLflow: `RUN_ID` (a trial's best), `RUN_ID:CELL` or
+`RUN_ID:B0,B1[,...]` (a repertoire cell by its flat index or its bin coordinates), and the
+listing of a repertoire's best cells with their physical checks."""
 
 from __future__ import annotations
 
@@ -10,6 +12,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from sim.linkage_doc import to_document
+
 if TYPE_CHECKING:
     from mlflow.tracking import MlflowClient
 
@@ -20,21 +24,28 @@ class LinkageError(ValueError):
 
 @dataclass(frozen=True)
 class LinkageRef:
-    """`RUN_ID` (the run's best linkage) or `RUN_ID:CELL` (one repertoire cell)."""
+    """`RUN_ID` (the run's best linkage), `RUN_ID:CELL` (a repertoire cell by its flat
+    index) or `RUN_ID:B0,B1[,...]` (by its bin coordinates, one per descriptor)."""
 
     run_id: str
     cell: int | None = None
+    bins: tuple[int, ...] | None = None
 
     @classmethod
     def parse(cls, text: str) -> LinkageRef:
-        """Returns the reference parsed from `RUN_ID[:CELL]`."""
-        run_id, sep, cell = text.partition(":")
-        if not run_id or (sep and not cell.isdigit()):
+        """Returns the reference parsed from `RUN_ID[:CELL | :B0,B1,...]`."""
+        run_id, sep, where = text.partition(":")
+        parts = where.split(",")
+        if not run_id or (sep and not all(p.isdigit() for p in parts)):
             raise LinkageError(
-                f"--linkage {text!r}: expected RUN_ID or RUN_ID:CELL "
-                "with CELL a non-negative integer"
+                f"{text!r}: expected RUN_ID, RUN_ID:CELL (a non-negative integer) or "
+                "RUN_ID:B0,B1,... (bin coordinates, e.g. 12,40)"
             )
-        return cls(run_id, int(cell) if sep else None)
+        if not sep:
+            return cls(run_id)
+        if len(parts) == 1:
+            return cls(run_id, cell=int(parts[0]))
+        return cls(run_id, bins=tuple(int(p) for p in parts))
 
 
 @dataclass(frozen=True)
@@ -75,14 +86,16 @@ def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
         raise LinkageError(f"--linkage: no MLflow run with id {ref.run_id!r}") from exc
     tags = run.data.tags
     with tempfile.TemporaryDirectory() as tmp:
-        if ref.cell is None:
+        if ref.cell is None and ref.bins is None:
             path = _download(client, ref.run_id, "best_linkage.json", Path(tmp))
-            document = json.loads(path.read_text(encoding="utf-8"))
+            document, cell = json.loads(path.read_text(encoding="utf-8")), None
         else:
-            document = _cell_document(client, ref, run.data.params.get("mode", "paper"), Path(tmp))
+            table = repertoire(client, ref.run_id, Path(tmp))
+            cell, genome = _find_cell(table, ref)
+            document = to_document(genome, run.data.params.get("mode", "paper"))
     return SourceLinkage(
         run_id=ref.run_id,
-        cell=ref.cell,
+        cell=cell,
         experiment_id=run.info.experiment_id,
         approach=tags.get("approach", "unknown"),
         fitness=tags.get("fitness", "unknown"),
@@ -90,17 +103,75 @@ def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
     )
 
 
-def _cell_document(client: MlflowClient, ref: LinkageRef, mode: str, tmp: Path) -> dict:
-    import pyarrow.parquet as pq
+def repertoire(client: MlflowClient, run_id: str, tmp: Path):
+    """Returns the run's repertoire.parquet as a pandas table (a row per filled cell)."""
+    import pandas as pd
 
-    from sim.linkage_doc import to_document
+    return pd.read_parquet(_download(client, run_id, "repertoire.parquet", tmp))
 
-    table = pq.read_table(_download(client, ref.run_id, "repertoire.parquet", tmp))
-    cells = table.column("cell").to_pylist()
-    if ref.cell not in cells:
+
+def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:
+    """Returns (flat cell, genome (56,)) of the repertoire row a cell reference names."""
+    bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))
+    if ref.bins is not None:
+        if len(ref.bins) != len(bin_columns):
+            raise LinkageError(
+                f"{ref.run_id}:{','.join(map(str, ref.bins))}: the repertoire has "
+                f"{len(bin_columns)} descriptors, so give {len(bin_columns)} bin coordinates"
+            )
+        hit = np.ones(len(table), dtype=bool)
+        for column, value in zip(bin_columns, ref.bins, strict=True):
+            hit &= table[column].to_numpy() == value
+        what = f"the cell at bins ({', '.join(map(str, ref.bins))})"
+    else:
+        hit = table["cell"].to_numpy() == ref.cell
+        what = f"cell {ref.cell}"
+    if not hit.any():
         raise LinkageError(
-            f"--linkage {ref.run_id}:{ref.cell}: cell {ref.cell} is not in the repertoire "
-            f"({len(cells)} filled cells)"
+            f"{ref.run_id}: {what} is not in the repertoire ({len(table)} filled cells); "
+            f"list them with: linkevo pull {ref.run_id} --list"
         )
-    genome = np.asarray(table.column("genome")[cells.index(ref.cell)].as_py(), dtype=float)
-    return to_document(genome, mode)
+    row = table.iloc[int(np.flatnonzero(hit)[0])]
+    return int(row["cell"]), np.asarray(row["genome"], dtype=float)
+
+
+def list_cells(client: MlflowClient, run_id: str, top: int, mode: str, buildable: bool = False):
+    """Returns the `top` lowest-loss cells of a run's repertoire with their physical checks.
+
+    Args:
+        buildable: keep only cells whose linkage passes `sim.physical`'s checks.
+
+    Returns:
+        A pandas table: cell, bins, loss, turns (fully), width and height (modules), min
+        transmission angle (degrees), toggle passages, largest stretch (modules), buildable;
+        ascending loss.
+    """
+    import pandas as pd
+
+    from sim import decode, simulate
+    from sim.physical import physical_checks
+
+    with tempfile.TemporaryDirectory() as tmp:
+        table = repertoire(client, run_id, Path(tmp))
+    table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
+    genomes = np.stack(table["genome"].to_numpy()).astype(float)
+    batch = decode(genomes, mode)
+    checks = physical_checks(batch, simulate(batch))
+    bins = [c for c in sorted(table.columns) if c.startswith("bin_")]
+    out = pd.DataFrame(
+        {
+            "cell": table["cell"],
+            "bins": [",".join(str(int(v)) for v in row) for row in table[bins].to_numpy()],
+            "loss": table["loss"],
+            "turns": checks.turns_fully,
+            "width": checks.size_modules[:, 0],
+            "height": checks.size_modules[:, 1],
+            "min_transmission_deg": checks.min_transmission_deg,
+            "toggles": checks.toggle_passages,
+            "max_stretch": checks.max_stretch,
+            "buildable": checks.buildable,
+        }
+    )
+    if buildable:
+        out = out[out["buildable"]]
+    return out.head(top).reset_index(drop=True)

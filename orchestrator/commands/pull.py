@@ -17,11 +17,25 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="fetch a linkage, its drawings and LEGO build sheet from MLflow",
         description=(
             "Write linkage.json, linkage.png and build_sheet.md/.csv for RUN_ID (a "
-            "trial's best linkage), RUN_ID:CELL (one repertoire cell), or with --best, "
-            "the best trial of grid GRID_ID."
+            "trial's best linkage), RUN_ID:CELL or RUN_ID:B0,B1,... (one repertoire cell, "
+            "by flat index or bin coordinates), or with --best, the best trial of grid "
+            "GRID_ID. With --list, print the repertoire's best cells and their physical "
+            "checks instead."
         ),
     )
-    parser.add_argument("ref", help="RUN_ID, RUN_ID:CELL, or GRID_ID with --best")
+    parser.add_argument("ref", help="RUN_ID, RUN_ID:CELL, RUN_ID:B0,B1,..., or GRID_ID with --best")
+    parser.add_argument(
+        "--list",
+        type=int,
+        nargs="?",
+        const=20,
+        default=None,
+        metavar="K",
+        help="print the K lowest-loss cells (default K: 20) with size and checks",
+    )
+    parser.add_argument(
+        "--buildable", action="store_true", help="with --list: only cells that pass the checks"
+    )
     parser.add_argument("--best", action="store_true", help="REF is a grid id: take its best trial")
     parser.add_argument("--approach", help="with --best: only this approach")
     parser.add_argument("--fitness", help="with --best: only this fitness")
@@ -111,9 +125,33 @@ def handle(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     try:
-        source = load_source(client, LinkageRef.parse(text))
+        ref = LinkageRef.parse(text)
+        if args.list is not None:
+            return _print_cells(client, ref, args.list, args.buildable)
+        source = load_source(client, ref)
     except LinkageError as exc:
         raise CliError(str(exc)) from exc
+    cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
+    print(f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
+          file=sys.stderr)  # fmt: skip
     for path in pull(source, args.out, gif=args.gif):
         print(path)
+    return 0
+
+
+def _print_cells(client, ref, top: int, buildable: bool) -> int:
+    """Prints a run's best repertoire cells with their checks (`linkevo pull RUN --list`)."""
+    from workers.linkages import list_cells
+
+    if top < 1:
+        raise CliError(f"--list {top}: give the number of cells to list, >= 1")
+    if ref.cell is not None or ref.bins is not None:
+        raise CliError("--list takes a run id (RUN_ID), not a cell")
+    mode = client.get_run(ref.run_id).data.params.get("mode", "paper")
+    table = list_cells(client, ref.run_id, top, mode, buildable)
+    if table.empty:
+        print(f"run {ref.run_id}: no {'buildable ' if buildable else ''}cell")
+        return 0
+    print(table.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
+    print(f"pull one with: linkevo pull {ref.run_id}:CELL  (or {ref.run_id}:B0,B1,...)")
     return 0

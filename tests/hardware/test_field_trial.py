@@ -47,6 +47,8 @@ def source_run(store, tmp_path, approach, genomes=None):
                 "cell": pa.array(list(genomes), pa.int64()),
                 "genome": pa.array([list(g) for g in genomes.values()], pa.list_(pa.float64())),
                 "loss": pa.array([0.1] * len(genomes), pa.float64()),
+                "bin_0": pa.array([c // 100 for c in genomes], pa.int64()),
+                "bin_1": pa.array([c % 100 for c in genomes], pa.int64()),
             }
         )
         path = tmp_path / "repertoire.parquet"
@@ -161,8 +163,9 @@ def test_unknown_run_and_cell_are_named(store, tmp_path, config_file, capsys):
     cfg = str(config_file("x"))
     for linkage, message in [
         ("0123abc", "no MLflow run with id '0123abc'"),
-        (f"{run_id}:99", f"--linkage {run_id}:99: cell 99 is not in the repertoire (1 filled"),
-        (f"{run_id}:x", "expected RUN_ID or RUN_ID:CELL"),
+        (f"{run_id}:99", f"{run_id}: cell 99 is not in the repertoire (1 filled"),
+        (f"{run_id}:x", "expected RUN_ID, RUN_ID:CELL"),
+        (f"{run_id}:1,2,3", "the repertoire has 2 descriptors, so give 2 bin coordinates"),
     ]:
         argv = ["hexapod", "trial", "--linkage", linkage, "--floor", "flat", "--simulate",
                 "--config", cfg, "--tracking-uri", uri, "--repeats", "1",
@@ -174,5 +177,6 @@ def test_unknown_run_and_cell_are_named(store, tmp_path, config_file, capsys):
 def test_linkage_ref_parsing():
     assert LinkageRef.parse("abc") == LinkageRef("abc", None)
     assert LinkageRef.parse("abc:12") == LinkageRef("abc", 12)
+    assert LinkageRef.parse("abc:12,40") == LinkageRef("abc", bins=(12, 40))
     with pytest.raises(LinkageError, match="expected RUN_ID"):
         LinkageRef.parse(":3")

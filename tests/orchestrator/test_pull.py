@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -11,7 +12,8 @@ from mlflow.tracking import MlflowClient
 import sim
 from orchestrator.cli import main
 from orchestrator.pull import build_sheet
-from sim.linkage_doc import to_document
+from sim.linkage_doc import FORMAT, to_document
+from sim.physical import physical_checks
 from workers.artifacts import write_json_atomic, write_parquet_atomic
 from workers.tracking import ensure_experiment
 
@@ -46,6 +48,8 @@ def store(tmp_path_factory):
             folder / "repertoire.parquet",
             {
                 "cell": np.array([17, 4242]),
+                "bin_0": np.array([0, 42]),
+                "bin_1": np.array([17, 42]),
                 "loss": ev.loss[valid[2:4]],
                 "genome": genomes[valid[2:4]],
             },
@@ -71,6 +75,37 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
         assert int(row["holes"]) == max(round(beam["length"]), 1) + 1
         assert abs(float(row["error_mm"])) <= 4.0 + 1e-9 or round(beam["length"]) == 0
     assert "MAP-LIS / Fp" in (out / "build_sheet.md").read_text()
+    assert f"pulling run {runs[0]} (MAP-LIS, Fp), its best linkage" in capsys.readouterr().err
+    pulled = json.loads((out / "linkage.json").read_text())
+    assert pulled["format"] == FORMAT and pulled["meta"]["run_id"] == runs[0]
+    assert pulled["checks"] == to_document(genomes[valid[0]])["checks"]
+    assert "Checks: " in (out / "build_sheet.md").read_text()
+
+
+def test_pull_a_cell_by_its_bin_coordinates_and_list_the_cells(store, tmp_path, capsys):
+    uri, runs, genomes, valid = store
+    by_bins, by_cell = tmp_path / "bins", tmp_path / "cell"
+    assert main(["pull", f"{runs[0]}:42,42", "--tracking-uri", uri, "--out", str(by_bins)]) == 0
+    assert "cell 4242" in capsys.readouterr().err
+    assert main(["pull", f"{runs[0]}:4242", "--tracking-uri", uri, "--out", str(by_cell)]) == 0
+    assert (by_bins / "build_sheet.csv").read_text() == (by_cell / "build_sheet.csv").read_text()
+    capsys.readouterr()
+    assert main(["pull", runs[0], "--list", "--tracking-uri", uri]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0].split() == [
+        "cell", "bins", "loss", "turns", "width", "height", "min_transmission_deg", "toggles",
+        "max_stretch", "buildable",
+    ]  # fmt: skip
+    losses = [float(line.split()[2]) for line in lines[1:3]]
+    assert losses == sorted(losses) and {line.split()[0] for line in lines[1:3]} == {"17", "4242"}
+    checks = physical_checks(
+        sim.decode(genomes[valid[2:4]]), sim.simulate(sim.decode(genomes[valid[2:4]]))
+    )
+    assert main(["pull", runs[0], "--list", "--buildable", "--tracking-uri", uri]) == 0
+    listed = capsys.readouterr().out
+    assert ("17 " in listed) == bool(checks.buildable[0])
+    assert main(["pull", f"{runs[0]}:3,4,5", "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
+    assert "has 2 descriptors, so give 2 bin coordinates" in capsys.readouterr().err
 
 
 def test_pull_a_cell_and_the_best_trial_of_a_grid(store, tmp_path):

@@ -1,0 +1,118 @@
+"""Provides PhysicalChecks and `physical_checks`: what a builder needs to know of a linkage
+beyond its loss, over one crank turn, for a batch.
+
+- **Turns fully**: every sampled crank angle assembled (no failed angle).
+- **Transmission angle** at each triangle joint P (beams P-A and P-C): the angle between
+  the two beams, folded to [0, 90] degrees (min(t, 180 - t)). Near 0 the two beams are
+  collinear: the joint is at a toggle position, where a built linkage can jam or take the
+  other assembly branch.
+- **Toggle passages**: crank angles at which some triangle joint's transmission angle is
+  below `TOGGLE_DEG`.
+- **Stretch**: the largest |distance(start, end) - length| of any beam at any assembled
+  angle. The simulation accepts a triangle whose anchors are up to the tolerance (0.1)
+  too far apart or too close (spec §2) and places the joint as if they were not; a rigid
+  beam cannot do that, so a linkage with a stretch above a few hundredths of a module
+  does not move as simulated.
+- **Size**: width and height in modules of the box every node sweeps over the turn.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim.decode import NODE_KINDS, LinkageBatch
+from sim.kinematics import Motion
+
+TOGGLE_DEG = 5.0
+"""A transmission angle below this is a toggle position."""
+BUILDABLE_STRETCH = 0.02
+"""Largest beam stretch (modules) that a built linkage absorbs in its pin clearance."""
+
+
+@dataclass(frozen=True)
+class PhysicalChecks:
+    """The checks of N linkages.
+
+    Attributes:
+        turns_fully: (N,) bool, every sampled angle assembled.
+        min_transmission_deg: (N,) float64, the smallest transmission angle of any triangle
+            joint over the turn (90 where the linkage has no triangle; NaN if it never
+            assembles).
+        toggle_passages: (N,) int64, assembled angles with a transmission angle below
+            TOGGLE_DEG.
+        max_stretch: (N,) float64, the largest beam stretch, modules (NaN if it never
+            assembles).
+        size_modules: (N, 2) float64, width and height of the swept box, modules.
+    """
+
+    turns_fully: np.ndarray
+    min_transmission_deg: np.ndarray
+    toggle_passages: np.ndarray
+    max_stretch: np.ndarray
+    size_modules: np.ndarray
+
+    @property
+    def buildable(self) -> np.ndarray:
+        """(N,) bool: turns fully, passes no toggle and stretches no beam beyond
+        BUILDABLE_STRETCH."""
+        return (
+            self.turns_fully
+            & (self.toggle_passages == 0)
+            & (np.nan_to_num(self.max_stretch, nan=np.inf) <= BUILDABLE_STRETCH)
+        )
+
+    def row(self, i: int) -> dict[str, float | int | bool]:
+        """Returns linkage i's checks as JSON-able values."""
+        return {
+            "turns_fully": bool(self.turns_fully[i]),
+            "min_transmission_deg": float(self.min_transmission_deg[i]),
+            "toggle_passages": int(self.toggle_passages[i]),
+            "max_stretch": float(self.max_stretch[i]),
+            "width_modules": float(self.size_modules[i, 0]),
+            "height_modules": float(self.size_modules[i, 1]),
+            "buildable": bool(self.buildable[i]),
+        }
+
+
+def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
+    """Returns the checks of decoded linkages and their simulated motion (N linkages)."""
+    with warnings.catch_warnings():  # NaN rows: linkages (or angles) that never assemble
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _checks(batch, motion)
+
+
+def _checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
+    pos = motion.positions  # (N, 12, A, 2), NaN at failed angles
+    n = pos.shape[0]
+    rows = np.arange(n)[:, None]
+
+    beam_start, beam_end = batch.beam_int[:, :, 0], batch.beam_int[:, :, 1]
+    present = beam_start >= 0
+    start = pos[rows, np.where(present, beam_start, 0)]  # (N, 15, A, 2)
+    end = pos[rows, np.where(present, beam_end, 0)]
+    stretch = np.abs(np.linalg.norm(end - start, axis=-1) - batch.beam_length[:, :, None])
+    stretch = np.where(present[:, :, None], stretch, np.nan)  # (N, 15, A)
+    max_stretch = np.nanmax(stretch.reshape(n, -1), axis=1)
+
+    triangle = batch.node_int[:, :, 0] == NODE_KINDS.index("triangle")  # (N, 12)
+    u = pos[rows, np.where(triangle, batch.node_int[:, :, 1], 0)] - pos  # joint -> A
+    v = pos[rows, np.where(triangle, batch.node_int[:, :, 2], 0)] - pos  # joint -> C
+    cos = np.sum(u * v, axis=-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1))
+    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))  # (N, 12, A)
+    transmission = np.where(triangle[:, :, None], np.minimum(angle, 180.0 - angle), np.inf)
+    per_angle = np.where(np.isnan(transmission), np.inf, transmission).min(axis=1)  # (N, A)
+    toggles = ((per_angle < TOGGLE_DEG) & motion.valid).sum(axis=1)
+    lowest = per_angle.min(axis=1)
+    min_transmission = np.where(motion.valid.any(axis=1), np.minimum(lowest, 90.0), np.nan)
+
+    flat = pos.reshape(n, -1, 2)
+    return PhysicalChecks(
+        turns_fully=motion.valid.all(axis=1),
+        min_transmission_deg=min_transmission,
+        toggle_passages=toggles.astype(np.int64),
+        max_stretch=max_stretch,
+        size_modules=np.nanmax(flat, axis=1) - np.nanmin(flat, axis=1),
+    )
