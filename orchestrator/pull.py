@@ -2,14 +2,17 @@
 
 from __future__ import annotations
 
+import collections
 import csv
 import io
 from pathlib import Path
 
+import numpy as np
+
 from sim.linkage_doc import from_document, to_document
 from sim.physical import TOGGLE_DEG
 from workers.artifacts import write_json_atomic, write_text_atomic
-from workers.drawing import draw_linkage
+from workers.drawing import draw_linkage, draw_path_overlay
 from workers.linkages import SourceLinkage
 
 SHEET_COLUMNS = (
@@ -22,19 +25,27 @@ SHEET_COLUMNS = (
     "modules",
     "holes",
     "error_mm",
+    "layer",
 )
 
 
-def build_sheet(document: dict) -> list[dict]:
-    """Returns one row per beam: its length, the nearest LEGO beam and the rounding error.
+def build_sheet(
+    document: dict, modules: list[int] | None = None, layers: list[int] | None = None
+) -> list[dict]:
+    """Returns one row per beam: its length, the LEGO beam that builds it and the error.
 
     A straight Technic beam with h holes spans h - 1 modules between its end holes, so a
-    link of length L modules is built from a beam with round(L) + 1 holes (at least 2).
+    link of M modules is built from a beam with M + 1 holes. `modules` are the LEGO
+    build's lengths (`sim.lego.quantise`, one per beam); without them each beam is
+    rounded on its own (at least 1 module). `layers` are the beams' layers (`sim.layers`),
+    0 next to the frame; blank without them.
     """
     unit_mm = float(document["units"]["unit_mm"])
+    if modules is None:
+        modules = [max(round(beam["length"]), 1) for beam in document["beams"]]
+    layers = layers if layers is not None else [""] * len(modules)
     rows = []
-    for beam in document["beams"]:
-        modules = max(round(beam["length"]), 1)
+    for beam, whole, layer in zip(document["beams"], modules, layers, strict=True):
         rows.append(
             {
                 "beam": beam["id"],
@@ -43,9 +54,10 @@ def build_sheet(document: dict) -> list[dict]:
                 "to": beam["end"],
                 "length": round(beam["length"], 3),
                 "length_mm": round(beam["length"] * unit_mm, 1),
-                "modules": modules,
-                "holes": modules + 1,
-                "error_mm": round((modules - beam["length"]) * unit_mm, 1),
+                "modules": int(whole),
+                "holes": int(whole) + 1,
+                "error_mm": round((whole - beam["length"]) * unit_mm, 1),
+                "layer": layer,
             }
         )
     return rows
@@ -66,10 +78,14 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
         "",
         checks_line(doc["checks"]),
         "",
+        lego_line(doc["lego"]),
+        "",
         "| " + " | ".join(SHEET_COLUMNS) + " |",
         "|" + "---|" * len(SHEET_COLUMNS),
     ]
     lines += ["| " + " | ".join(str(row[c]) for c in SHEET_COLUMNS) + " |" for row in rows]
+    if "layers" in doc["lego"]:
+        lines += ["", *assembly_lines(doc, rows)]
     lines += [
         "",
         "Extension beams continue their parent beam rigidly: build the two as one straight "
@@ -90,8 +106,80 @@ def checks_line(checks: dict) -> str:
     )
 
 
+def assembly_lines(doc: dict, rows: list[dict]) -> list[str]:
+    """Returns the pins, the motor axle and the parts list of a LEGO build (Markdown).
+
+    Layer -1 is the frame (the motor and the static nodes' holes); a pin at a joint spans
+    the layers of the beams that meet there (and the frame at a frame node).
+    """
+    layer = {row["beam"]: int(row["layer"]) for row in rows}
+    kinds = {n["id"]: n["kind"] for n in doc["nodes"]}
+    lines = [f"Layers: {doc['lego']['n_layers']} (0 next to the frame). Pins and axle:", ""]
+    pins = collections.Counter()
+    for node in sorted({e for b in doc["beams"] for e in (b["start"], b["end"])}):
+        beams = [b["id"] for b in doc["beams"] if node in (b["start"], b["end"])]
+        spans = {layer[b] for b in beams} | ({-1} if kinds[node] in ("motor", "static") else set())
+        if len(spans) < 2:
+            continue  # one straight beam passes through: no pin
+        low, high = min(spans), max(spans)
+        part = "motor axle" if kinds[node] == "motor" else f"{high - low + 1}L pin"
+        where = "frame" if low == -1 else f"layer {low}"
+        beam_list = ", ".join(f"b{b}" for b in beams)
+        lines.append(f"- node {node} ({kinds[node]}): {part}, {where} to layer {high} "
+                     f"({beam_list})")  # fmt: skip
+        pins[part] += 1
+    holes = collections.Counter(row["holes"] for row in rows)
+    lines += ["", "Parts: " + ", ".join(
+        [f"{n} x {h}-hole beam" for h, n in sorted(holes.items())]
+        + [f"{n} x {part}" for part, n in sorted(pins.items())]
+    ) + "."]  # fmt: skip
+    return lines
+
+
+def lego_line(lego: dict) -> str:
+    """Returns the LEGO build (`sim.lego.quantise`) of a pulled document in one paragraph."""
+    if "refused" in lego:
+        return f"LEGO build: none ({lego['refused']}); the table rounds each beam on its own."
+    return (
+        f"LEGO build: the whole-module lengths below, chosen among {lego['roundings']} "
+        f"roundings ({lego['feasible']} turn fully with rigid beams) as the one whose foot "
+        f"path stays closest: it moves by {lego['mean_shift']:.2f} modules on average "
+        f"(at most {lego['max_shift']:.2f}; path_overlay.png); loss {lego['original_loss']:.3f} "
+        f"as evolved, {lego['loss']:.3f} as built ({lego['fitness']})."
+    )
+
+
+def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
+    """Returns the LEGO build of a linkage as JSON-able values, or why there is none."""
+    from sim.layers import layer_plan
+    from sim.lego import QuantiseError, quantise
+
+    fitness = fitness if fitness in ("Fp", "Fsl") else "Fp"
+    try:
+        q = quantise(genome, mode, fitness, n_angles)
+    except QuantiseError as exc:
+        return {"refused": str(exc)}
+    plan = layer_plan(q.batch, q.motion)
+    return {
+        "lengths": q.lengths.tolist(),
+        "layers": plan.layer.tolist(),
+        "n_layers": plan.n_layers,
+        "roundings": q.roundings,
+        "feasible": q.feasible,
+        "mean_shift": q.mean_shift,
+        "max_shift": q.max_shift,
+        "fitness": fitness,
+        "loss": q.loss,
+        "original_loss": q.original_loss,
+        "checks": q.checks.row(0),
+        "foot_path": {"x": q.foot_x.tolist(), "y": q.foot_y.tolist()},
+        "original_path": {"x": q.original_x.tolist(), "y": q.original_y.tolist()},
+    }
+
+
 def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
-    """Writes linkage.json, linkage.png, build_sheet.md and .csv (and linkage.gif) into out."""
+    """Writes linkage.json, linkage.png, build_sheet.md and .csv, path_overlay.png (when a
+    LEGO build exists) and linkage.gif (with `gif`) into out."""
     out.mkdir(parents=True, exist_ok=True)
     genome, mode = from_document(source.document)
     n_angles = int(source.document.get("n_angles", 40))
@@ -105,7 +193,8 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
     # Written afresh from the genome, so an older document comes out complete (topology,
     # crank angles, physical checks).
     doc = to_document(genome, mode, n_angles=n_angles, meta=meta)
-    rows = build_sheet(doc)
+    doc["lego"] = lego_build(genome, mode, source.fitness, n_angles)
+    rows = build_sheet(doc, doc["lego"].get("lengths"), doc["lego"].get("layers"))
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=SHEET_COLUMNS, lineterminator="\n")
     writer.writeheader()
@@ -116,4 +205,10 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
     write_text_atomic(paths[2], table.getvalue())
     for suffix in (".png", ".gif") if gif else (".png",):
         paths.append(draw_linkage(genome, mode, out / f"linkage{suffix}", n_angles=n_angles))
+    lego = doc["lego"]
+    if "lengths" in lego:
+        built = (np.array(lego["foot_path"]["x"]), np.array(lego["foot_path"]["y"]))
+        evolved = (np.array(lego["original_path"]["x"]), np.array(lego["original_path"]["y"]))
+        title = f"foot path as evolved and as built: mean shift {lego['mean_shift']:.2f} modules"
+        paths.append(draw_path_overlay(evolved, built, out / "path_overlay.png", title))
     return paths

@@ -84,18 +84,31 @@ def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
         return _checks(batch, motion)
 
 
+def max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
+    """Returns (N,) the largest beam stretch of each linkage, modules (NaN if it never
+    assembles)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return _max_stretch(batch, motion)
+
+
+def _max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
+    pos = motion.positions  # (N, 12, A, 2), NaN at failed angles
+    rows = np.arange(pos.shape[0])[:, None]
+    beam_start, beam_end = batch.beam_int[:, :, 0], batch.beam_int[:, :, 1]
+    present = beam_start >= 0
+    span = pos[rows, np.where(present, beam_end, 0)] - pos[rows, np.where(present, beam_start, 0)]
+    length = np.sqrt(span[..., 0] ** 2 + span[..., 1] ** 2)  # (N, 15, A)
+    stretch = np.abs(length - batch.beam_length[:, :, None])
+    stretch = np.where(present[:, :, None], stretch, np.nan)
+    return np.nanmax(stretch.reshape(pos.shape[0], -1), axis=1)
+
+
 def _checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
     pos = motion.positions  # (N, 12, A, 2), NaN at failed angles
     n = pos.shape[0]
     rows = np.arange(n)[:, None]
-
-    beam_start, beam_end = batch.beam_int[:, :, 0], batch.beam_int[:, :, 1]
-    present = beam_start >= 0
-    start = pos[rows, np.where(present, beam_start, 0)]  # (N, 15, A, 2)
-    end = pos[rows, np.where(present, beam_end, 0)]
-    stretch = np.abs(np.linalg.norm(end - start, axis=-1) - batch.beam_length[:, :, None])
-    stretch = np.where(present[:, :, None], stretch, np.nan)  # (N, 15, A)
-    max_stretch = np.nanmax(stretch.reshape(n, -1), axis=1)
+    stretch = _max_stretch(batch, motion)
 
     triangle = batch.node_int[:, :, 0] == NODE_KINDS.index("triangle")  # (N, 12)
     u = pos[rows, np.where(triangle, batch.node_int[:, :, 1], 0)] - pos  # joint -> A
@@ -113,6 +126,6 @@ def _checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
         turns_fully=motion.valid.all(axis=1),
         min_transmission_deg=min_transmission,
         toggle_passages=toggles.astype(np.int64),
-        max_stretch=max_stretch,
+        max_stretch=stretch,
         size_modules=np.nanmax(flat, axis=1) - np.nanmin(flat, axis=1),
     )

@@ -13,6 +13,7 @@ from sim.kinematics import DEFAULT_ANGLES, simulate
 from workers.artifacts import atomic_path
 
 SUFFIXES = (".png", ".gif")
+LABEL_BOX = {"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none"}
 
 
 def draw_linkage(
@@ -66,6 +67,13 @@ def _figure(batch, motion, k: int, title: str):
     for b in range(int(batch.n_beams[0])):
         s, e = batch.beam_start[0, b], batch.beam_end[0, b]
         ax.plot(*zip(pos[s, k], pos[e, k], strict=True), "-", color="0.25", lw=2.5, zorder=2)
+        mid = (pos[s, k] + pos[e, k]) / 2  # beam numbers as on the build sheet
+        ax.text(*mid, f"b{b}", fontsize=6, color="tab:green", ha="center", va="center",
+                bbox=LABEL_BOX, zorder=6)  # fmt: skip
+    for j in range(pos.shape[0]):  # node numbers
+        if np.isfinite(pos[j, k, 0]):
+            ax.annotate(str(j), pos[j, k], xytext=(4, 4), textcoords="offset points",
+                        fontsize=7, zorder=6)  # fmt: skip
     kinds = batch.node_kind[0]
     moving = kinds >= 2
     ax.scatter(*pos[moving, k].T, s=40, c="white", edgecolors="k", zorder=3, label="moving node")
@@ -93,3 +101,27 @@ def _frame_image(fig):
     fig.savefig(buf, format="png", dpi=72)
     buf.seek(0)
     return Image.open(buf).convert("P", palette=Image.Palette.ADAPTIVE)
+
+
+def draw_path_overlay(
+    original: tuple[np.ndarray, np.ndarray],
+    built: tuple[np.ndarray, np.ndarray],
+    path: Path,
+    title: str,
+) -> Path:
+    """Writes a PNG of a linkage's foot path (x (A,), y (A,)) over its LEGO build's."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(6, 4.5))
+    ax = fig.add_axes((0.12, 0.12, 0.85, 0.8))
+    ax.plot(*original, "-o", color="0.5", ms=3, lw=1, label="simulated (evolved lengths)")
+    ax.plot(*built, "-x", color="tab:red", ms=4, lw=1.2, label="LEGO build (whole modules)")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, lw=0.3)
+    ax.set_xlabel("x (LEGO modules)")
+    ax.set_ylabel("y (LEGO modules)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7)
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, format="png", dpi=120)
+    return Path(path)

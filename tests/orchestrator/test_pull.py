@@ -66,14 +66,22 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
     assert main(["pull", runs[0], "--tracking-uri", uri, "--out", str(out), "--gif"]) == 0
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(
-        ["linkage.json", "linkage.png", "linkage.gif", "build_sheet.md", "build_sheet.csv"]
-    )
+        ["linkage.json", "linkage.png", "linkage.gif", "build_sheet.md", "build_sheet.csv",
+         "path_overlay.png"]
+    )  # fmt: skip
     rows = list(csv.DictReader((out / "build_sheet.csv").open()))
     doc = to_document(genomes[valid[0]])
-    assert len(rows) == len(doc["beams"])
-    for row, beam in zip(rows, doc["beams"], strict=True):
-        assert int(row["holes"]) == max(round(beam["length"]), 1) + 1
-        assert abs(float(row["error_mm"])) <= 4.0 + 1e-9 or round(beam["length"]) == 0
+    lego = json.loads((out / "linkage.json").read_text())["lego"]
+    assert len(rows) == len(doc["beams"]) == len(lego["lengths"])
+    for row, beam, whole in zip(rows, doc["beams"], lego["lengths"], strict=True):
+        assert int(row["holes"]) == whole + 1  # the LEGO build's lengths, re-simulated
+        assert abs(whole - beam["length"]) < 1 or whole == 1
+        assert abs(float(row["error_mm"])) < 8.0
+    assert [int(r["layer"]) for r in rows] == lego["layers"]
+    assert max(lego["layers"]) + 1 == lego["n_layers"]
+    sheet = (out / "build_sheet.md").read_text()
+    assert f"Layers: {lego['n_layers']}" in sheet and "motor axle, frame to layer" in sheet
+    assert "Parts: " in sheet and "-hole beam" in sheet
     assert "MAP-LIS / Fp" in (out / "build_sheet.md").read_text()
     assert f"pulling run {runs[0]} (MAP-LIS, Fp), its best linkage" in capsys.readouterr().err
     pulled = json.loads((out / "linkage.json").read_text())
@@ -112,9 +120,11 @@ def test_pull_a_cell_and_the_best_trial_of_a_grid(store, tmp_path):
     uri, runs, genomes, valid = store
     cell = tmp_path / "cell"
     assert main(["pull", f"{runs[0]}:4242", "--tracking-uri", uri, "--out", str(cell)]) == 0
-    sheet = build_sheet(to_document(genomes[valid[3]]))
+    lego = json.loads((cell / "linkage.json").read_text())["lego"]
+    sheet = build_sheet(to_document(genomes[valid[3]]), lego.get("lengths"))
     rows = list(csv.DictReader((cell / "build_sheet.csv").open()))
     assert [int(r["holes"]) for r in rows] == [r["holes"] for r in sheet]
+    assert "LEGO build: " in (cell / "build_sheet.md").read_text()
     best = tmp_path / "grid-best"
     argv = ["pull", GRID, "--best", "--fitness", "Fp", "--tracking-uri", uri, "--out", str(best)]
     assert main(argv) == 0

@@ -1,0 +1,211 @@
+"""Provides `quantise`: a linkage rebuilt with whole-module beams (LEGO Technic), re-simulated.
+
+A Technic beam's holes are one module apart, so every beam length must be a whole number
+of modules (the frame's holes, the static nodes, already are). Rounding each beam on its
+own can stop the linkage turning or move its foot path far; instead every combination of
+rounding each non-whole length down or up (at least 1 module) is simulated as one batch,
+and of those that turn fully with exact kinematics (no beam stretched by the spec's
+tolerance band: a rigid beam cannot stretch) the one whose foot path stays closest to the
+original's (mean distance over the sampled crank angles) is chosen. A linkage has at most
+15 beams, so at most 2^15 = 32,768 roundings, simulated in one call.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sim import reference
+from sim.decode import NODE_KINDS, LinkageBatch, decode
+from sim.fitness import named_target
+from sim.kinematics import DEFAULT_ANGLES, Motion, simulate
+from sim.physical import PhysicalChecks, max_stretch, physical_checks
+
+EXACT = 1e-9
+"""Largest beam stretch (modules) of a rounding that counts as exact kinematics."""
+
+
+class QuantiseError(ValueError):
+    """No whole-module rounding of the linkage turns fully; the message says how close any came."""
+
+
+@dataclass(frozen=True)
+class Quantised:
+    """A linkage with whole-module beams.
+
+    Attributes:
+        lengths: (B,) int64 beam lengths in modules, beam order.
+        original: (B,) float64 the linkage's beam lengths.
+        batch: the rounded linkage (one row).
+        motion: its simulation.
+        checks: its physical checks.
+        foot_x, foot_y: (A,) its foot path; original_x, original_y: (A,) the original's.
+        mean_shift, max_shift: mean and largest distance between the two paths (modules).
+        loss: the rounded linkage's loss under `fitness` (the spec's fitness, re-simulated).
+        original_loss: the original's loss under the same fitness.
+        roundings: how many roundings were simulated; feasible: how many turned fully
+            with exact kinematics.
+    """
+
+    lengths: np.ndarray
+    original: np.ndarray
+    batch: LinkageBatch
+    motion: Motion
+    checks: PhysicalChecks
+    foot_x: np.ndarray
+    foot_y: np.ndarray
+    original_x: np.ndarray
+    original_y: np.ndarray
+    mean_shift: float
+    max_shift: float
+    loss: float
+    original_loss: float
+    roundings: int
+    feasible: int
+
+
+def quantise(
+    genome: np.ndarray, mode: str = "paper", fitness: str = "Fp", n_angles: int = DEFAULT_ANGLES
+) -> Quantised:
+    """Returns the whole-module rounding of a linkage whose foot path is closest to its own.
+
+    Args:
+        genome: (56,) the linkage.
+        mode: "paper" or "legacy".
+        fitness: "Fp" or "Fsl", for the two losses reported.
+        n_angles: crank angles per turn.
+
+    Raises:
+        QuantiseError: when no rounding turns fully without stretching a beam.
+    """
+    base = decode(np.asarray(genome, dtype=np.float64).reshape(1, -1), mode)
+    here = simulate(base, n_angles)
+    n_beams = int(base.n_beams[0])
+    original = base.beam_length[0, :n_beams].copy()
+    options = [_roundings(length) for length in original]
+    combos = np.array(list(itertools.product(*options)), dtype=np.int64)  # (R, B)
+    batch = _with_lengths(base, combos)
+    motion = simulate(batch, n_angles)
+    turning = motion.valid.all(axis=1)
+    stretch = np.full(len(combos), np.inf)
+    turns = np.flatnonzero(turning)
+    for chunk in np.array_split(turns, max(1, len(turns) // 2048)) if len(turns) else []:
+        stretch[chunk] = max_stretch(_rows(batch, chunk), _rows(motion, chunk))
+    ok = turning & (stretch <= EXACT)
+    if not ok.any():
+        closest = float(stretch[turning].min()) if turning.any() else math.nan
+        raise QuantiseError(
+            f"no whole-module rounding of the {n_beams} beams turns fully with rigid beams: "
+            f"of {len(combos)} roundings (each length down or up), {int(turning.sum())} turn "
+            f"fully in simulation and the least stretch among them is {closest:.3f} modules"
+        )
+    x0, y0 = _foot_path(here, 0)
+    feet = motion.positions[np.arange(len(combos)), motion.foot]  # (R, A, 2)
+    shifts = np.hypot(feet[:, :, 0] - x0, feet[:, :, 1] - y0).mean(axis=1)
+    shifts = np.where(ok, shifts, np.inf)
+    best = int(np.argmin(shifts))  # ties: the first rounding in product order
+    x, y = _foot_path(motion, best)
+    one = _with_lengths(base, combos[best : best + 1])
+    built = simulate(one, n_angles)
+    return Quantised(
+        lengths=combos[best],
+        original=original,
+        batch=one,
+        motion=built,
+        checks=physical_checks(one, built),
+        foot_x=x,
+        foot_y=y,
+        original_x=x0,
+        original_y=y0,
+        mean_shift=float(shifts[best]),
+        max_shift=float(np.max(np.hypot(x - x0, y - y0))),
+        loss=_loss(genome, mode, fitness, n_angles, combos[best]),
+        original_loss=_loss(genome, mode, fitness, n_angles, None),
+        roundings=len(combos),
+        feasible=int(ok.sum()),
+    )
+
+
+def _rows(arrays, index: np.ndarray):
+    """The rows `index` of a LinkageBatch or Motion (every array field)."""
+    return dataclasses.replace(
+        arrays,
+        **{
+            f.name: getattr(arrays, f.name)[index]
+            for f in dataclasses.fields(arrays)
+            if isinstance(getattr(arrays, f.name), np.ndarray)
+        },
+    )
+
+
+def _roundings(length: float) -> tuple[int, ...]:
+    low, high = max(math.floor(length), 1), max(math.ceil(length), 1)
+    return (low,) if low == high else (low, high)
+
+
+def _with_lengths(base: LinkageBatch, lengths: np.ndarray) -> LinkageBatch:
+    """Returns R copies of a one-linkage batch with beam lengths (R, B) put into its
+    node parameters (the crank, each triangle's l1 and l2, each extension's length)."""
+    r, n_beams = lengths.shape
+    node_float = np.repeat(base.node_float, r, axis=0)
+    beam_length = np.repeat(base.beam_length, r, axis=0)
+    beam_length[:, :n_beams] = lengths
+    kinds = base.node_int[0, :, 0]
+    ends = base.beam_int[0, :n_beams, 1]
+    for j, kind in enumerate(kinds):
+        beams = np.flatnonzero(ends == j)  # the beams that place node j, in decode order
+        name = NODE_KINDS[int(kind)]
+        if name in ("crank", "extension"):
+            node_float[:, j, 0] = lengths[:, beams[0]]
+        elif name == "triangle":
+            l1, l2 = lengths[:, beams[0]], lengths[:, beams[1]]
+            node_float[:, j, 0], node_float[:, j, 1] = l1, l2
+            same = l1 == l2  # the backup point exists only then (sim.kernels)
+            angle = node_float[:, j, 2]
+            node_float[:, j, 3] = np.where(same, l1 * np.cos(angle), 0.0)
+            node_float[:, j, 4] = np.where(same, l1 * np.sin(angle), 0.0)
+    return dataclasses.replace(
+        base,
+        node_int=np.repeat(base.node_int, r, axis=0),
+        node_float=node_float,
+        beam_int=np.repeat(base.beam_int, r, axis=0),
+        beam_length=beam_length,
+        n_beams=np.repeat(base.n_beams, r),
+        positions0=np.repeat(base.positions0, r, axis=0),
+    )
+
+
+def _foot_path(motion: Motion, i: int) -> tuple[np.ndarray, np.ndarray]:
+    path = motion.positions[i, int(motion.foot[i])]
+    return path[:, 0], path[:, 1]
+
+
+def _loss(genome, mode: str, fitness: str, n_angles: int, lengths: np.ndarray | None) -> float:
+    """The spec's loss of the linkage, with its beams set to `lengths` when given, computed
+    by the plain reference simulator (which takes any beam lengths)."""
+    linkage = reference.decode_linkage(np.asarray(genome, dtype=np.float64), mode)
+    if lengths is not None:
+        linkage = _reference_with_lengths(linkage, [float(v) for v in lengths])
+    motion = reference.simulate_linkage(linkage, n_angles)
+    return reference.losses(motion, fitness, mode, named_target("D16"))[0]
+
+
+def _reference_with_lengths(linkage: reference.Linkage, lengths: list[float]):
+    beams = tuple(
+        dataclasses.replace(b, length=v) for b, v in zip(linkage.beams, lengths, strict=True)
+    )
+    by_end = {}
+    for index, beam in enumerate(beams):
+        by_end.setdefault(beam.end, []).append(index)
+    blocks = []
+    for block in linkage.blocks:
+        placed = by_end[block.node]
+        if isinstance(block, reference.Triangle):
+            blocks.append(dataclasses.replace(block, l1=lengths[placed[0]], l2=lengths[placed[1]]))
+        else:
+            blocks.append(dataclasses.replace(block, length=lengths[placed[0]]))
+    return dataclasses.replace(linkage, crank_length=lengths[0], blocks=tuple(blocks), beams=beams)
