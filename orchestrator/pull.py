@@ -204,7 +204,8 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
     write_text_atomic(paths[1], sheet_markdown(source, doc, rows))
     write_text_atomic(paths[2], table.getvalue())
     for suffix in (".png", ".gif") if gif else (".png",):
-        paths.append(draw_linkage(genome, mode, out / f"linkage{suffix}", n_angles=n_angles))
+        drawing = out / f"linkage{suffix}"
+        paths.append(draw_linkage(genome, mode, drawing, n_angles=n_angles, numbered=True))
     lego = doc["lego"]
     if "lengths" in lego:
         built = (np.array(lego["foot_path"]["x"]), np.array(lego["foot_path"]["y"]))

@@ -23,11 +23,14 @@ def draw_linkage(
     *,
     n_angles: int = DEFAULT_ANGLES,
     title: str | None = None,
+    numbered: bool = False,
 ) -> Path:
     """Writes a drawing of one linkage to `path` (.png still, .gif one crank turn).
 
     Shows the motor, static and moving nodes, the beams at the first crank angle (each
-    frame's angle in a GIF), the crank circle and the foot path. Returns `path`.
+    frame's angle in a GIF), the crank circle and the foot path; with `numbered`, the node
+    numbers and beam numbers (b0, b1, ...) of the build sheet (about 90 ms more, so the
+    trials' own drawings go without). Returns `path`.
     """
     path = Path(path)
     if path.suffix.lower() not in SUFFIXES:
@@ -40,17 +43,17 @@ def draw_linkage(
     title = title or f"{mode} mode, foot node {foot}, error {int(motion.error[0])}"
     with atomic_path(path) as tmp:
         if path.suffix.lower() == ".png":
-            fig = _figure(batch, motion, int(valid[0]), title)
+            fig = _figure(batch, motion, int(valid[0]), title, numbered)
             fig.savefig(tmp, format="png", dpi=120)
         else:
-            frames = [_frame_image(_figure(batch, motion, int(k), title)) for k in valid]
+            frames = [_frame_image(_figure(batch, motion, int(k), title, numbered)) for k in valid]
             frames[0].save(
                 tmp, format="gif", save_all=True, append_images=frames[1:], duration=80, loop=0
             )
     return path
 
 
-def _figure(batch, motion, k: int, title: str):
+def _figure(batch, motion, k: int, title: str, numbered: bool):
     """Returns a matplotlib figure of linkage 0 of `batch` at sample k."""
     from matplotlib.figure import Figure
     from matplotlib.patches import Circle
@@ -67,10 +70,10 @@ def _figure(batch, motion, k: int, title: str):
     for b in range(int(batch.n_beams[0])):
         s, e = batch.beam_start[0, b], batch.beam_end[0, b]
         ax.plot(*zip(pos[s, k], pos[e, k], strict=True), "-", color="0.25", lw=2.5, zorder=2)
-        mid = (pos[s, k] + pos[e, k]) / 2  # beam numbers as on the build sheet
-        ax.text(*mid, f"b{b}", fontsize=6, color="tab:green", ha="center", va="center",
-                bbox=LABEL_BOX, zorder=6)  # fmt: skip
-    for j in range(pos.shape[0]):  # node numbers
+        if numbered:  # beam numbers as on the build sheet
+            ax.text(*(pos[s, k] + pos[e, k]) / 2, f"b{b}", fontsize=6, color="tab:green",
+                    ha="center", va="center", bbox=LABEL_BOX, zorder=6)  # fmt: skip
+    for j in range(pos.shape[0]) if numbered else ():  # node numbers
         if np.isfinite(pos[j, k, 0]):
             ax.annotate(str(j), pos[j, k], xytext=(4, 4), textcoords="offset points",
                         fontsize=7, zorder=6)  # fmt: skip
