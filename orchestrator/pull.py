@@ -98,6 +98,8 @@ def checks_line(checks: dict) -> str:
     """Returns the physical checks of a linkage document (`sim.physical`) in one sentence."""
     verdict = "buildable" if checks["buildable"] else "NOT buildable as simulated"
     turn = "turns fully" if checks["turns_fully"] else "does not turn fully"
+    if checks["max_stretch"] is None:
+        return f"Checks: {verdict}: it assembles at no crank angle."
     return (
         f"Checks: {verdict}: {turn}; smallest transmission angle "
         f"{checks['min_transmission_deg']:.1f} deg, {checks['toggle_passages']} toggle "
@@ -172,9 +174,14 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
         "loss": q.loss,
         "original_loss": q.original_loss,
         "checks": q.checks.row(0),
-        "foot_path": {"x": q.foot_x.tolist(), "y": q.foot_y.tolist()},
-        "original_path": {"x": q.original_x.tolist(), "y": q.original_y.tolist()},
+        "foot_path": {"x": _finite(q.foot_x), "y": _finite(q.foot_y)},
+        "original_path": {"x": _finite(q.original_x), "y": _finite(q.original_y)},
     }
+
+
+def _finite(values: np.ndarray) -> list[float | None]:
+    """Returns values as a JSON list, None where NaN (a failed crank angle)."""
+    return [None if np.isnan(v) else float(v) for v in values]
 
 
 def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
@@ -208,8 +215,9 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
         paths.append(draw_linkage(genome, mode, drawing, n_angles=n_angles, numbered=True))
     lego = doc["lego"]
     if "lengths" in lego:
-        built = (np.array(lego["foot_path"]["x"]), np.array(lego["foot_path"]["y"]))
-        evolved = (np.array(lego["original_path"]["x"]), np.array(lego["original_path"]["y"]))
+        path = lego["foot_path"], lego["original_path"]
+        built = (np.array(path[0]["x"], dtype=float), np.array(path[0]["y"], dtype=float))
+        evolved = (np.array(path[1]["x"], dtype=float), np.array(path[1]["y"], dtype=float))
         title = f"foot path as evolved and as built: mean shift {lego['mean_shift']:.2f} modules"
         paths.append(draw_path_overlay(evolved, built, out / "path_overlay.png", title))
     return paths

@@ -43,8 +43,10 @@ class Quantised:
         batch: the rounded linkage (one row).
         motion: its simulation.
         checks: its physical checks.
-        foot_x, foot_y: (A,) its foot path; original_x, original_y: (A,) the original's.
-        mean_shift, max_shift: mean and largest distance between the two paths (modules).
+        foot_x, foot_y: (A,) its foot path; original_x, original_y: (A,) the original's
+            (NaN where the original fails).
+        mean_shift, max_shift: mean and largest distance between the two paths (modules),
+            over the angles where the original assembles.
         loss: the rounded linkage's loss under `fitness` (the spec's fitness, re-simulated).
         original_loss: the original's loss under the same fitness.
         roundings: how many roundings were simulated; feasible: how many turned fully
@@ -104,8 +106,9 @@ def quantise(
             f"fully in simulation and the least stretch among them is {closest:.3f} modules"
         )
     x0, y0 = _foot_path(here, 0)
-    feet = motion.positions[np.arange(len(combos)), motion.foot]  # (R, A, 2)
-    shifts = np.hypot(feet[:, :, 0] - x0, feet[:, :, 1] - y0).mean(axis=1)
+    seen = here.valid[0]  # compared where the evolved linkage assembles
+    feet = motion.positions[np.arange(len(combos)), motion.foot][:, seen]  # (R, A', 2)
+    shifts = np.hypot(feet[:, :, 0] - x0[seen], feet[:, :, 1] - y0[seen]).mean(axis=1)
     shifts = np.where(ok, shifts, np.inf)
     best = int(np.argmin(shifts))  # ties: the first rounding in product order
     x, y = _foot_path(motion, best)
@@ -122,7 +125,7 @@ def quantise(
         original_x=x0,
         original_y=y0,
         mean_shift=float(shifts[best]),
-        max_shift=float(np.max(np.hypot(x - x0, y - y0))),
+        max_shift=float(np.max(np.hypot(x - x0, y - y0)[seen])),
         loss=_loss(genome, mode, fitness, n_angles, combos[best]),
         original_loss=_loss(genome, mode, fitness, n_angles, None),
         roundings=len(combos),

@@ -65,14 +65,19 @@ class PhysicalChecks:
         )
 
     def row(self, i: int) -> dict[str, float | int | bool]:
-        """Returns linkage i's checks as JSON-able values."""
+        """Returns linkage i's checks as JSON-able values (None where a value is NaN: a
+        linkage that never assembles)."""
+
+        def number(value: float) -> float | None:  # JSON has no NaN
+            return None if np.isnan(value) else float(value)
+
         return {
             "turns_fully": bool(self.turns_fully[i]),
-            "min_transmission_deg": float(self.min_transmission_deg[i]),
+            "min_transmission_deg": number(self.min_transmission_deg[i]),
             "toggle_passages": int(self.toggle_passages[i]),
-            "max_stretch": float(self.max_stretch[i]),
-            "width_modules": float(self.size_modules[i, 0]),
-            "height_modules": float(self.size_modules[i, 1]),
+            "max_stretch": number(self.max_stretch[i]),
+            "width_modules": number(self.size_modules[i, 0]),
+            "height_modules": number(self.size_modules[i, 1]),
             "buildable": bool(self.buildable[i]),
         }
 
