@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.linkage_doc import from_document, to_document
+from sim.linkage_doc import from_document, json_floats, to_document
 from sim.physical import TOGGLE_DEG
 from workers.artifacts import write_json_atomic, write_text_atomic
 from workers.drawing import draw_linkage, draw_path_overlay
@@ -174,14 +174,9 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
         "loss": q.loss,
         "original_loss": q.original_loss,
         "checks": q.checks.row(0),
-        "foot_path": {"x": _finite(q.foot_x), "y": _finite(q.foot_y)},
-        "original_path": {"x": _finite(q.original_x), "y": _finite(q.original_y)},
+        "foot_path": {"x": json_floats(q.foot_x), "y": json_floats(q.foot_y)},
+        "original_path": {"x": json_floats(q.original_x), "y": json_floats(q.original_y)},
     }
-
-
-def _finite(values: np.ndarray) -> list[float | None]:
-    """Returns values as a JSON list, None where NaN (a failed crank angle)."""
-    return [None if np.isnan(v) else float(v) for v in values]
 
 
 def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:

@@ -93,8 +93,8 @@ def to_document(
         "nodes": nodes,
         "beams": beams,
         "foot_path": {
-            "x": [None if math.isnan(v) else float(v) for v in foot_x],
-            "y": [None if math.isnan(v) else float(v) for v in foot_y],
+            "x": json_floats(foot_x),
+            "y": json_floats(foot_y),
         },
         "meta": dict(meta or {}),
     }
@@ -120,6 +120,11 @@ def from_document(doc: dict) -> tuple[np.ndarray, str]:
     if stored.shape != rebuilt.shape or not np.allclose(stored, rebuilt, rtol=0, atol=1e-9):
         raise ValueError("document beams do not match its genome: edited or from another version")
     return genome, mode
+
+
+def json_floats(values: np.ndarray) -> list[float | None]:
+    """Returns values (A,) as a JSON list, None where NaN (a failed crank angle)."""
+    return [None if math.isnan(v) else float(v) for v in values]
 
 
 def batch_from_document(doc: dict) -> LinkageBatch:

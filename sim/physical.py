@@ -18,6 +18,7 @@ beyond its loss, over one crank turn, for a batch.
 
 from __future__ import annotations
 
+import functools
 import warnings
 from dataclasses import dataclass
 
@@ -82,22 +83,23 @@ class PhysicalChecks:
         }
 
 
-def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
-    """Returns the checks of decoded linkages and their simulated motion (N linkages)."""
-    with warnings.catch_warnings():  # NaN rows: linkages (or angles) that never assemble
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return _checks(batch, motion)
+def _quiet(function):
+    """Runs `function` without numpy's all-NaN warnings (linkages or angles that never
+    assemble)."""
+
+    @functools.wraps(function)
+    def quiet(*args, **kwargs):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return function(*args, **kwargs)
+
+    return quiet
 
 
+@_quiet
 def max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
     """Returns (N,) the largest beam stretch of each linkage, modules (NaN if it never
     assembles)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        return _max_stretch(batch, motion)
-
-
-def _max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
     pos = motion.positions  # (N, 12, A, 2), NaN at failed angles
     rows = np.arange(pos.shape[0])[:, None]
     beam_start, beam_end = batch.beam_int[:, :, 0], batch.beam_int[:, :, 1]
@@ -109,11 +111,13 @@ def _max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
     return np.nanmax(stretch.reshape(pos.shape[0], -1), axis=1)
 
 
-def _checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
+@_quiet
+def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
+    """Returns the checks of decoded linkages and their simulated motion (N linkages)."""
     pos = motion.positions  # (N, 12, A, 2), NaN at failed angles
     n = pos.shape[0]
     rows = np.arange(n)[:, None]
-    stretch = _max_stretch(batch, motion)
+    stretch = max_stretch(batch, motion)
 
     triangle = batch.node_int[:, :, 0] == NODE_KINDS.index("triangle")  # (N, 12)
     u = pos[rows, np.where(triangle, batch.node_int[:, :, 1], 0)] - pos  # joint -> A

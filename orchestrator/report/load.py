@@ -238,7 +238,7 @@ def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
     names = [c.removeprefix("metrics.") for c in row.index if c.startswith("metrics.")]
     series = {}
     for name in names:
-        if name in HISTORY_COLUMNS[1:] and pd.notna(row[f"metrics.{name}"]):  # not iteration
+        if name in HISTORY_COLUMNS and name != "iteration" and pd.notna(row[f"metrics.{name}"]):
             points = client.get_metric_history(row.run_id, name)
             series[name] = pd.Series({m.step: m.value for m in points}, dtype=float)
     if not series:
