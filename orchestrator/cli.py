@@ -16,6 +16,7 @@ COMMAND_MODULES = (
     "orchestrator.commands.grid",
     "orchestrator.commands.report",
     "orchestrator.commands.pull",
+    "orchestrator.commands.explore",
     "orchestrator.commands.cluster",
     "orchestrator.commands.hexapod",
 )

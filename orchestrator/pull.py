@@ -29,6 +29,11 @@ SHEET_COLUMNS = (
 )
 
 
+def own_modules(lengths) -> list[int]:
+    """Returns each beam length rounded on its own to whole modules (at least 1)."""
+    return [max(round(float(length)), 1) for length in lengths]
+
+
 def build_sheet(
     document: dict, modules: list[int] | None = None, layers: list[int] | None = None
 ) -> list[dict]:
@@ -42,7 +47,7 @@ def build_sheet(
     """
     unit_mm = float(document["units"]["unit_mm"])
     if modules is None:
-        modules = [max(round(beam["length"]), 1) for beam in document["beams"]]
+        modules = own_modules(beam["length"] for beam in document["beams"])
     layers = layers if layers is not None else [""] * len(modules)
     rows = []
     for beam, whole, layer in zip(document["beams"], modules, layers, strict=True):

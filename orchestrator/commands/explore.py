@@ -1,0 +1,84 @@
+"""Provides `linkevo explore`: an offline HTML page to browse repertoires and pick a design."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from orchestrator.cli import CliError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds the `explore` subcommand."""
+    parser = subparsers.add_parser(
+        "explore",
+        help="write an offline HTML page to browse a repertoire (or a grid's) and pick a cell",
+        description=(
+            "Write one self-contained HTML page for REF: a trial's repertoire (RUN_ID), or "
+            "every repertoire trial of a grid (GRID_ID) behind a trial picker. The page shows "
+            "the map of loss (4-D maps folded, the folding chosen on the page), each cell's "
+            "linkage, animated foot path and physical checks, filters on the checks, and for "
+            "a clicked cell its build sheet and `linkevo pull` command. The page is also "
+            "logged as explorer.html to the trial's run (a grid's: its parent run), so it "
+            "opens in the MLflow UI."
+        ),
+    )
+    parser.add_argument("ref", help="a repertoire trial's RUN_ID, or a GRID_ID")
+    parser.add_argument(
+        "--drawn",
+        type=int,
+        default=None,
+        metavar="K",
+        help="draw the linkages of each trial's K lowest-loss cells only (default: every "
+        "cell of a trial; the 1000 best per trial on a grid's page, which keeps the page "
+        "of a study-budget grid near 20 MB)",
+    )
+    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment")
+    parser.add_argument(
+        "--tracking-uri",
+        default=None,
+        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=None, help="the page (default: reports/explore/REF.html)"
+    )
+    parser.add_argument("--no-log", action="store_true", help="do not log the page to MLflow")
+    parser.set_defaults(func=handle)
+
+
+def handle(args: argparse.Namespace) -> int:
+    """Handles `linkevo explore`."""
+    from mlflow.tracking import MlflowClient
+
+    from orchestrator.explore import GRID_DRAWN, ExploreError, explore, grid_trials, trial_run
+    from orchestrator.report.load import GridNotFoundError, find_grid_run
+    from workers.tracking import require_store, resolve_tracking_uri
+
+    if args.drawn is not None and args.drawn < 1:
+        raise CliError(f"--drawn {args.drawn}: give the number of cells to draw, >= 1")
+    out = args.out if args.out is not None else Path("reports") / "explore" / f"{args.ref}.html"
+    if out.suffix.lower() != ".html" or out.is_dir():
+        raise CliError(f"--out {str(out)!r}: give a file name ending in .html")
+    client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
+    try:
+        try:
+            grid_id, parent = find_grid_run(client, args.ref, args.experiment)
+        except GridNotFoundError as no_grid:
+            try:
+                trials, log_to = [trial_run(client, args.ref)], args.ref
+            except ExploreError as exc:
+                raise ExploreError(f"{exc} ({no_grid})") from exc
+            title = f"linkevo explorer: {trials[0].trial_key} (run {args.ref})"
+            drawn = args.drawn
+        else:
+            trials, log_to = grid_trials(client, grid_id, args.experiment), parent
+            title = f"linkevo explorer: grid {grid_id} ({len(trials)} repertoire trials)"
+            drawn = args.drawn if args.drawn is not None else GRID_DRAWN
+    except ExploreError as exc:
+        raise CliError(str(exc)) from exc
+    out.parent.mkdir(parents=True, exist_ok=True)
+    explore(client, trials, out, title=title, drawn=drawn, log_to=None if args.no_log else log_to)
+    print(out)
+    if not args.no_log:
+        print(f"logged as explorer.html to run {log_to}")
+    return 0

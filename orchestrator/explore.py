@@ -1,0 +1,278 @@
+"""Provides `explore`: one self-contained, offline HTML page to browse repertoires and pick
+a design (`linkevo explore RUN_ID|GRID_ID`).
+
+The page shows a repertoire as a heatmap of loss (4-D maps folded into 2-D tiles, the
+folding chosen on the page), each cell's linkage with its animated foot path, loss,
+descriptors and physical checks (`sim.physical`), filters on the checks, a build sheet and
+the `linkevo pull RUN_ID:CELL` command for a clicked cell, and two pinned cells side by
+side. A grid's page holds every repertoire trial behind a trial picker.
+
+Each trial's cells travel as gzip-compressed JSON (base64) in the page, inflated by the
+browser's own `DecompressionStream` when the trial is shown, so the page needs no network
+and no library. A cell takes about 250 bytes: 2.1 MB for a study-budget repertoire of
+8,400 cells.
+"""
+
+from __future__ import annotations
+
+import base64
+import gzip
+import html
+import json
+import tempfile
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from algorithms.factory import REPERTOIRE_APPROACHES
+from orchestrator.pull import own_modules
+from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, search_trial_runs
+from sim import decode, simulate
+from sim.decode import BEAM_KINDS, NODE_KINDS
+from sim.descriptors import DESCRIPTOR_SPACES
+from sim.linkage_doc import DEFAULT_UNIT_MM
+from sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from workers.artifacts import write_bytes_atomic
+
+PAGE_ARTIFACT = "explorer.html"
+"""The page's name among a run's artefacts (a trial's run, or a grid's parent run)."""
+GRID_DRAWN = 500
+"""Cells per trial whose linkage a grid page draws by default (the lowest-loss ones)."""
+TEMPLATE = "explorer_page.html"
+
+
+class ExploreError(ValueError):
+    """A run or grid that has no repertoire to explore; the message says what would do."""
+
+
+@dataclass(frozen=True)
+class TrialRun:
+    """One repertoire trial to put on a page: its run, tags and settings."""
+
+    run_id: str
+    trial_key: str
+    approach: str
+    fitness: str
+    mode: str
+    n_angles: int
+
+
+def _rounded(values: np.ndarray, decimals: int) -> list:
+    """Returns `values` rounded, as (nested) lists with None for NaN (JSON has no NaN)."""
+    values = np.round(np.asarray(values, dtype=np.float64), decimals)
+    return np.where(np.isfinite(values), values, None).tolist()
+
+
+def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = None) -> dict:
+    """Returns the page's data of one repertoire.
+
+    Args:
+        table: the repertoire (`repertoire.parquet`): a row per filled cell with cell,
+            loss, error, desc_<d>, bin_<d> and genome (56,).
+        trial: the run it came from.
+        drawn: draw the linkage of only the `drawn` lowest-loss cells (None: every cell).
+
+    Returns:
+        A JSON-able dict: the trial's identity, the descriptor names and bins per
+        descriptor, and `cells`, one per row in ascending loss: c (flat cell), b (bins, D),
+        l (loss), d (descriptors, D), e (failed angles), k (checks: turns fully, buildable,
+        smallest transmission angle in degrees, toggle passages, largest stretch, width and
+        height in modules) and g (the drawing, or None): n (nodes at the first assembled
+        angle, (12, 2), None for absent nodes), t (node kinds), m (beams: start, end, kind,
+        length, modules rounded on their own), f (foot path x and y, (2, A)).
+    """
+    table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
+    bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))
+    desc_columns = [f"desc_{c.removeprefix('bin_')}" for c in bin_columns]
+    space = DESCRIPTOR_SPACES.get(trial.approach, DESCRIPTOR_SPACES["MAP-LIS"])
+    if space.dims == len(bin_columns):
+        names, resolution = list(space.names), space.resolution
+    else:  # a grid this linkevo does not name: number the descriptors
+        names = [f"d{i}" for i in range(len(bin_columns))]
+        resolution = int(table[bin_columns].to_numpy().max()) + 1
+    genomes = np.stack(table["genome"].to_numpy()).astype(np.float64)
+    batch = decode(genomes, trial.mode)
+    motion = simulate(batch, trial.n_angles)
+    checks = physical_checks(batch, motion)
+    first = np.argmax(motion.valid, axis=1)  # the first assembled angle (0 if none)
+    nodes = motion.positions[np.arange(len(table)), :, first]  # (N, 12, 2)
+    foot = motion.positions[np.arange(len(table)), motion.foot]  # (N, A, 2)
+    k = [
+        checks.turns_fully.astype(int).tolist(),
+        checks.buildable.astype(int).tolist(),
+        _rounded(checks.min_transmission_deg, 1),
+        checks.toggle_passages.tolist(),
+        _rounded(checks.max_stretch, 3),
+        _rounded(checks.size_modules[:, 0], 1),
+        _rounded(checks.size_modules[:, 1], 1),
+    ]
+    bins = table[bin_columns].to_numpy().astype(int).tolist()
+    descriptors = _rounded(table[desc_columns].to_numpy(), 3)
+    loss = _rounded(table["loss"].to_numpy(), 4)
+    error = table["error"].to_numpy().astype(int).tolist()
+    cells = []
+    for i, cell in enumerate(table["cell"].to_numpy().astype(int).tolist()):
+        drawing = None
+        if drawn is None or i < drawn:
+            n_beams = int(batch.n_beams[i])
+            lengths = batch.beam_length[i, :n_beams]
+            drawing = {
+                "n": _rounded(nodes[i], 1),
+                "t": batch.node_kind[i].tolist(),
+                "m": [
+                    [int(s), int(e), int(kind), round(float(length), 2), modules]
+                    for s, e, kind, length, modules in zip(
+                        batch.beam_start[i, :n_beams],
+                        batch.beam_end[i, :n_beams],
+                        batch.beam_kind[i, :n_beams],
+                        lengths,
+                        own_modules(lengths),
+                        strict=True,
+                    )
+                ],
+                "f": _rounded(foot[i].T, 1),
+            }
+        cells.append(
+            {
+                "c": cell,
+                "b": bins[i],
+                "l": loss[i],
+                "d": descriptors[i],
+                "e": error[i],
+                "k": [column[i] for column in k],
+                "g": drawing,
+            }
+        )
+    return {
+        "run_id": trial.run_id,
+        "trial_key": trial.trial_key,
+        "approach": trial.approach,
+        "fitness": trial.fitness,
+        "mode": trial.mode,
+        "descriptors": names,
+        "resolution": resolution,
+        "drawn": len(cells) if drawn is None else min(drawn, len(cells)),
+        "cells": cells,
+    }
+
+
+def render_page(title: str, views: list[dict]) -> str:
+    """Returns the explorer page over one or more repertoire views (`repertoire_view`)."""
+    template = resources.files("orchestrator").joinpath(TEMPLATE).read_text(encoding="utf-8")
+    blobs, index = [], []
+    for i, view in enumerate(views):
+        packed = gzip.compress(json.dumps(view, separators=(",", ":"), allow_nan=False).encode())
+        blobs.append(
+            f'<script type="application/octet-stream" id="trial-{i}">'
+            f"{base64.b64encode(packed).decode('ascii')}</script>"
+        )
+        index.append(
+            {
+                "id": f"trial-{i}",
+                "label": f"{view['trial_key']} ({len(view['cells'])} cells)",
+                "run_id": view["run_id"],
+            }
+        )
+    settings = {
+        "node_kinds": NODE_KINDS,
+        "beam_kinds": BEAM_KINDS,
+        "toggle_deg": TOGGLE_DEG,
+        "buildable_stretch": BUILDABLE_STRETCH,
+        "unit_mm": DEFAULT_UNIT_MM,
+        "trials": index,
+    }
+    return (
+        template.replace("{{TITLE}}", html.escape(title))
+        .replace("{{SETTINGS}}", json.dumps(settings).replace("</", "<\\/"))
+        .replace("{{DATA}}", "\n".join(blobs))
+    )
+
+
+def trial_run(client, run_id: str) -> TrialRun:
+    """Returns a repertoire trial's identity from its MLflow run.
+
+    Raises:
+        ExploreError: no such run, or a run whose approach keeps no repertoire.
+    """
+    from mlflow.exceptions import MlflowException
+
+    try:
+        run = client.get_run(run_id)
+    except MlflowException as exc:
+        raise ExploreError(f"{run_id!r} is neither a trial run nor a grid id here") from exc
+    tags, params = run.data.tags, run.data.params
+    approach = tags.get("approach", "unknown")
+    if approach not in REPERTOIRE_APPROACHES:
+        raise ExploreError(
+            f"run {run_id} is a {approach} trial, which keeps a population, not a repertoire; "
+            f"explore a trial of {', '.join(REPERTOIRE_APPROACHES)} or a grid id"
+        )
+    return TrialRun(
+        run_id=run_id,
+        trial_key=tags.get("trial_key", run_id),
+        approach=approach,
+        fitness=tags.get("fitness", "unknown"),
+        mode=params.get("mode", "paper"),
+        n_angles=int(params.get("n_angles", 40)),
+    )
+
+
+def grid_trials(client, grid_id: str, experiment: str) -> list[TrialRun]:
+    """Returns a grid's FINISHED repertoire trials in the study's order (one run per key).
+
+    Raises:
+        ExploreError: the grid has none.
+    """
+    runs = search_trial_runs(client, grid_id, experiment)
+    if runs.empty or "tags.approach" not in runs:
+        raise ExploreError(f"grid {grid_id} has no trial runs")
+    runs = runs[(runs.status == "FINISHED") & runs["tags.approach"].isin(REPERTOIRE_APPROACHES)]
+    runs = runs.drop_duplicates("tags.trial_key")
+    if runs.empty:
+        raise ExploreError(
+            f"grid {grid_id} has no finished trial of {', '.join(REPERTOIRE_APPROACHES)} to explore"
+        )
+
+    def order(row) -> tuple:
+        approach, fitness = row["tags.approach"], row["tags.fitness"]
+        return (
+            APPROACH_ORDER.index(approach) if approach in APPROACH_ORDER else len(APPROACH_ORDER),
+            FITNESS_ORDER.index(fitness) if fitness in FITNESS_ORDER else len(FITNESS_ORDER),
+            int(row.get("tags.trial_index", 0) or 0),
+        )
+
+    rows = sorted((row for _, row in runs.iterrows()), key=order)
+    return [trial_run(client, row.run_id) for row in rows]
+
+
+def explore(
+    client,
+    trials: list[TrialRun],
+    out: Path,
+    *,
+    title: str,
+    drawn: int | None = None,
+    log_to: str | None = None,
+) -> Path:
+    """Writes the explorer page of `trials` to `out` and returns it.
+
+    Args:
+        drawn: per trial, draw only the `drawn` lowest-loss cells (None: all).
+        log_to: a run id to log the page to as `explorer.html` (None: do not log).
+    """
+    from workers.linkages import repertoire
+
+    views = []
+    with tempfile.TemporaryDirectory(prefix="linkevo-explore-") as tmp:
+        for trial in trials:
+            table = repertoire(client, trial.run_id, Path(tmp) / trial.run_id)
+            views.append(repertoire_view(table, trial, drawn))
+        write_bytes_atomic(out, render_page(title, views).encode("utf-8"))
+        if log_to is not None:
+            named = Path(tmp) / PAGE_ARTIFACT
+            named.write_bytes(out.read_bytes())
+            client.log_artifact(log_to, str(named))
+    return out

@@ -1,0 +1,275 @@
+"""Tests for `linkevo explore`: the page's data, the CLI, and the page in a real headless
+Chromium (Debian's `chromium` driven by selenium through `chromium-driver`)."""
+
+from __future__ import annotations
+
+import base64
+import gzip
+import json
+import re
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mlflow.entities import Param
+from mlflow.tracking import MlflowClient
+
+from orchestrator.cli import main
+from orchestrator.explore import TrialRun, repertoire_view
+from sim import decode, simulate
+from sim.physical import physical_checks
+from workers.evaluators import LocalEvaluator
+from workers.linkages import repertoire
+from workers.mlflow_recorder import MlflowRecorder
+from workers.tracking import ensure_experiment
+from workers.trial import TrialSpec, run_trial
+from workers.trial_task import SPEC_PARAMS
+
+GRID = "e0e0e0e0e0e0"
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMEDRIVER = Path("/usr/bin/chromedriver")
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """A real sqlite store with a grid of three real trials (MAP-ST, MAP-LIS, EA), each
+    run by the trial loop and recorded by the MLflow recorder as a grid records them."""
+    root = tmp_path_factory.mktemp("explore")
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    experiment = ensure_experiment(uri)
+    client = MlflowClient(uri)
+    client.create_run(experiment, tags={"grid_id": GRID, "linkevo.kind": "grid"})
+    runs = {}
+    for index, approach in enumerate(("MAP-ST", "MAP-LIS", "EA")):
+        spec = TrialSpec(approach, "Fp", evaluations=3000, batch_size=1000, seed=index)
+        key = f"{approach}/Fp/00"
+        tags = {"grid_id": GRID, "linkevo.kind": "trial", "approach": approach,
+                "fitness": "Fp", "trial_key": key, "trial_index": "0"}  # fmt: skip
+        run_id = client.create_run(experiment, run_name=key, tags=tags).info.run_id
+        values = asdict(spec)
+        client.log_batch(run_id, params=[Param(k, str(values[k])) for k in SPEC_PARAMS])
+        evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
+        run_trial(spec, evaluator, MlflowRecorder(client, run_id), root / key.replace("/", "_"))
+        client.set_terminated(run_id)
+        runs[approach] = run_id
+    return uri, runs
+
+
+def _view(uri: str, run_id: str, approach: str, tmp_path: Path, drawn=None) -> tuple:
+    table = repertoire(MlflowClient(uri), run_id, tmp_path)
+    trial = TrialRun(run_id, f"{approach}/Fp/00", approach, "Fp", "paper", 40)
+    return table, repertoire_view(table, trial, drawn)
+
+
+def test_view_holds_every_cell_with_its_checks_and_drawing(store, tmp_path):
+    uri, runs = store
+    table, view = _view(uri, runs["MAP-ST"], "MAP-ST", tmp_path)
+    assert view["descriptors"] == ["mean_beam_length", "depth", "drive_size", "moving_share"]
+    assert view["resolution"] == 10
+    cells = view["cells"]
+    assert len(cells) == len(table) > 50
+    losses = [c["l"] for c in cells]
+    assert losses == sorted(losses)
+    by_cell = table.set_index("cell")
+    genomes = np.stack([by_cell.loc[c["c"], "genome"] for c in cells]).astype(float)
+    batch = decode(genomes, "paper")
+    motion = simulate(batch, 40)
+    checks = physical_checks(batch, motion)
+    for i, cell in enumerate(cells):
+        row = by_cell.loc[cell["c"]]
+        assert cell["b"] == [int(row[f"bin_{d}"]) for d in range(4)]
+        assert cell["l"] == pytest.approx(row["loss"], abs=1e-4)
+        k = cell["k"]
+        assert k[0] == int(checks.turns_fully[i]) and k[1] == int(checks.buildable[i])
+        assert k[3] == checks.toggle_passages[i]
+        assert k[5] == pytest.approx(checks.size_modules[i, 0], abs=0.05)
+        g = cell["g"]
+        n_beams = int(batch.n_beams[i])
+        assert [m[:2] for m in g["m"]] == [
+            [int(batch.beam_start[i, b]), int(batch.beam_end[i, b])] for b in range(n_beams)
+        ]
+        assert [m[4] for m in g["m"]] == [max(round(v), 1) for v in batch.beam_length[i, :n_beams]]
+        foot = motion.positions[i, motion.foot[i]]
+        drawn = np.array([[np.nan if v is None else v for v in axis] for axis in g["f"]])
+        assert np.allclose(drawn.T, foot, atol=0.051, equal_nan=True)
+    _, few = _view(uri, runs["MAP-ST"], "MAP-ST", tmp_path / "few", drawn=5)
+    assert [c["g"] is not None for c in few["cells"]] == [i < 5 for i in range(len(cells))]
+    assert few["drawn"] == 5
+
+
+def _page_views(path: Path) -> list[dict]:
+    text = path.read_text(encoding="utf-8")
+    blobs = re.findall(r'<script type="application/octet-stream" id="trial-\d+">([^<]+)</script>',
+                       text)  # fmt: skip
+    return [json.loads(gzip.decompress(base64.b64decode(b))) for b in blobs]
+
+
+def test_explore_writes_an_offline_page_and_logs_it_to_the_run(store, tmp_path, capsys):
+    uri, runs = store
+    out = tmp_path / "lis.html"
+    assert main(["explore", runs["MAP-LIS"], "--tracking-uri", uri, "--out", str(out)]) == 0
+    text = out.read_text(encoding="utf-8")
+    assert not re.search(r"""(src|href)\s*=\s*["']?(https?:)?//""", text)  # nothing to fetch
+    views = _page_views(out)
+    assert [v["run_id"] for v in views] == [runs["MAP-LIS"]]
+    assert views[0]["drawn"] == len(views[0]["cells"])
+    logged = [a.path for a in MlflowClient(uri).list_artifacts(runs["MAP-LIS"])]
+    assert "explorer.html" in logged
+    assert f"logged as explorer.html to run {runs['MAP-LIS']}" in capsys.readouterr().out
+
+
+def test_explore_a_grid_puts_every_repertoire_trial_on_one_page(store, tmp_path):
+    uri, _ = store
+    out = tmp_path / "grid.html"
+    args = ["explore", GRID, "--tracking-uri", uri, "--out", str(out), "--drawn", "20"]
+    assert main(args) == 0
+    views = _page_views(out)
+    assert [v["trial_key"] for v in views] == ["MAP-LIS/Fp/00", "MAP-ST/Fp/00"]  # study order
+    assert all(v["drawn"] == 20 and sum(c["g"] is not None for c in v["cells"]) == 20
+               for v in views)  # fmt: skip
+    client = MlflowClient(uri)
+    parent = client.search_runs(
+        [client.get_experiment_by_name("linkevo").experiment_id], "tags.`linkevo.kind` = 'grid'"
+    )[0]
+    assert "explorer.html" in [a.path for a in client.list_artifacts(parent.info.run_id)]
+
+
+def test_explore_refuses_bad_input_before_writing(store, tmp_path, capsys):
+    uri, runs = store
+    out = tmp_path / "page.html"
+    cases = [
+        (
+            [runs["EA"]],
+            "is a EA trial, which keeps a population, not a repertoire; explore a "
+            "trial of MAP-WH, MAP-LIS, MAP-ST, MAP-AU, RANDOM or a grid id",
+        ),
+        (["ffff00001111"], f"known grids: ['{GRID}']"),
+        ([runs["MAP-ST"], "--drawn", "0"], "--drawn 0: give the number of cells to draw, >= 1"),
+    ]
+    for extra, message in cases:
+        assert main(["explore", *extra, "--tracking-uri", uri, "--out", str(out)]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["explore", runs["MAP-ST"], "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
+    assert "give a file name ending in .html" in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """A real headless Chromium."""
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for argument in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000"):
+        options.add_argument(argument)
+    driver = webdriver.Chrome(options=options, service=Service(str(CHROMEDRIVER)))
+    yield driver
+    driver.quit()
+
+
+def _open(browser, path: Path) -> None:
+    browser.get(path.resolve().as_uri())
+    deadline = time.monotonic() + 20
+    while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
+        assert time.monotonic() < deadline, "the explorer page did not load its data"
+        time.sleep(0.05)
+
+
+def _point_at(browser, cell: int, click: bool = False) -> None:
+    """Moves the real mouse over a map cell (and clicks it)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    where = browser.execute_script("return window.explorer.cellCenter(arguments[0])", cell)
+    canvas = browser.find_element(By.ID, "map")
+    size = canvas.size  # selenium's offsets count from the element's centre
+    chain = ActionChains(browser).move_to_element_with_offset(
+        canvas, round(where["x"] - size["width"] / 2), round(where["y"] - size["height"] / 2)
+    )
+    (chain.click() if click else chain).perform()
+
+
+def _text(browser, element_id: str) -> str:
+    from selenium.webdriver.common.by import By
+
+    return browser.find_element(By.ID, element_id).text
+
+
+def test_page_in_chromium_hover_click_pin_filter_and_fold(store, tmp_path, browser):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    uri, runs = store
+    out = tmp_path / "st.html"
+    assert main(["explore", runs["MAP-ST"], "--tracking-uri", uri, "--out", str(out),
+                 "--no-log"]) == 0  # fmt: skip
+    view = _page_views(out)[0]
+    _open(browser, out)
+    worst, best = view["cells"][-1], view["cells"][0]
+    _point_at(browser, worst["c"])
+    hovered = _text(browser, "hover-info")
+    assert f"cell {worst['c']}: loss {worst['l']:.4f}" in hovered
+    _point_at(browser, best["c"], click=True)
+    selected = _text(browser, "selected-info")
+    assert f"cell {best['c']}: loss {best['l']:.4f}" in selected
+    assert _text(browser, "pull-command") == f"linkevo pull {runs['MAP-ST']}:{best['c']}"
+    sheet = browser.find_elements(By.CSS_SELECTOR, "#selected-info table tr")
+    assert len(sheet) == 1 + len(best["g"]["m"])  # a row per beam
+    browser.find_element(By.ID, "pin").click()
+    _point_at(browser, worst["c"], click=True)
+    browser.find_element(By.ID, "pin").click()
+    pinned = _text(browser, "pins")
+    assert f"linkevo pull {runs['MAP-ST']}:{best['c']}" in pinned
+    assert f"linkevo pull {runs['MAP-ST']}:{worst['c']}" in pinned
+
+    n_buildable = sum(c["k"][1] for c in view["cells"])
+    browser.find_element(By.ID, "f-buildable").click()
+    passing = f"{n_buildable} of {len(view['cells'])} cells pass the filters"
+    assert _text(browser, "passing") == passing
+    browser.find_element(By.ID, "f-buildable").click()
+    browser.find_element(By.ID, "f-size").send_keys("20")
+    small = sum(max(c["k"][5], c["k"][6]) <= 20 for c in view["cells"])
+    assert _text(browser, "passing").startswith(f"{small} of ")
+
+    moved = next(c for c in view["cells"] if c["b"][0] != c["b"][3])
+    where = "return window.explorer.cellCenter(arguments[0])"
+    before = browser.execute_script(where, moved["c"])
+    folds = browser.find_elements(By.CSS_SELECTOR, "select.fold")
+    assert len(folds) == 4
+    Select(folds[0]).select_by_visible_text("moving_share")  # swaps with the tiles' y
+    folds = browser.find_elements(By.CSS_SELECTOR, "select.fold")
+    assert [Select(f).first_selected_option.text for f in folds] == [
+        "moving_share",
+        "depth",
+        "drive_size",
+        "mean_beam_length",
+    ]
+    assert browser.execute_script(where, moved["c"]) != before
+    _point_at(browser, moved["c"])  # the folded map still finds each cell
+    assert f"cell {moved['c']}: loss {moved['l']:.4f}" in _text(browser, "hover-info")
+
+
+def test_grid_page_in_chromium_picks_a_trial(store, tmp_path, browser):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    uri, runs = store
+    out = tmp_path / "grid.html"
+    assert main(["explore", GRID, "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
+    views = _page_views(out)
+    _open(browser, out)
+    picker = Select(browser.find_element(By.ID, "trial"))
+    assert [o.text.split(" ")[0] for o in picker.options] == ["MAP-LIS/Fp/00", "MAP-ST/Fp/00"]
+    picker.select_by_index(1)
+    deadline = time.monotonic() + 10
+    while runs["MAP-ST"] not in _text(browser, "summary"):
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    cell = views[1]["cells"][0]
+    _point_at(browser, cell["c"], click=True)
+    said = _text(browser, "selected-info")
+    assert f"MAP-ST/Fp/00, cell {cell['c']}: loss {cell['l']:.4f}" in said
