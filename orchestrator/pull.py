@@ -12,7 +12,8 @@ import numpy as np
 from sim.linkage_doc import from_document, json_floats, to_document
 from sim.physical import TOGGLE_DEG
 from workers.artifacts import write_json_atomic, write_text_atomic
-from workers.drawing import draw_linkage, draw_path_overlay
+from workers.build_drawings import draw_layers, draw_path_overlay, draw_template
+from workers.drawing import draw_linkage
 from workers.linkages import SourceLinkage
 
 SHEET_COLUMNS = (
@@ -91,6 +92,12 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
     lines += ["| " + " | ".join(str(row[c]) for c in SHEET_COLUMNS) + " |" for row in rows]
     if "layers" in doc["lego"]:
         lines += ["", *assembly_lines(doc, rows)]
+        lines += [
+            "",
+            "Drawings: linkage.png (numbered as this sheet), layers.png (the beams of each "
+            "layer), template.pdf (the build at 1:1 on A4 pages: print at actual size and "
+            "lay the beams on it), path_overlay.png (the foot path as evolved and as built).",
+        ]
     lines += [
         "",
         "Extension beams continue their parent beam rigidly: build the two as one straight "
@@ -167,6 +174,7 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     except QuantiseError as exc:
         return {"refused": str(exc)}
     plan = layer_plan(q.batch, q.motion)
+    first = int(np.argmax(q.motion.valid[0]))
     return {
         "lengths": q.lengths.tolist(),
         "layers": plan.layer.tolist(),
@@ -179,14 +187,16 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
         "loss": q.loss,
         "original_loss": q.original_loss,
         "checks": q.checks.row(0),
+        "nodes": [json_floats(p) for p in q.motion.positions[0, :, first]],
         "foot_path": {"x": json_floats(q.foot_x), "y": json_floats(q.foot_y)},
         "original_path": {"x": json_floats(q.original_x), "y": json_floats(q.original_y)},
     }
 
 
 def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
-    """Writes linkage.json, linkage.png, build_sheet.md and .csv, path_overlay.png (when a
-    LEGO build exists) and linkage.gif (with `gif`) into out."""
+    """Writes linkage.json, linkage.png, build_sheet.md and .csv, linkage.gif (with `gif`)
+    and, when a LEGO build exists, path_overlay.png, layers.png (the exploded layer view)
+    and template.pdf (1:1 on A4 pages) into out."""
     out.mkdir(parents=True, exist_ok=True)
     genome, mode = from_document(source.document)
     n_angles = int(source.document.get("n_angles", 40))
@@ -220,4 +230,6 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
         evolved = (np.array(path[1]["x"], dtype=float), np.array(path[1]["y"], dtype=float))
         title = f"foot path as evolved and as built: mean shift {lego['mean_shift']:.2f} modules"
         paths.append(draw_path_overlay(evolved, built, out / "path_overlay.png", title))
+        paths.append(draw_layers(doc, out / "layers.png"))
+        paths.append(draw_template(doc, out / "template.pdf"))
     return paths

@@ -1,4 +1,6 @@
-"""Provides linkage drawings: a still like the paper's Fig. 1 (PNG) or one crank turn (GIF)."""
+"""Provides linkage drawings: a still like the paper's Fig. 1 (PNG) or one crank turn (GIF).
+
+The LEGO build's own drawings are in `workers.build_drawings`."""
 
 from __future__ import annotations
 
@@ -104,27 +106,3 @@ def _frame_image(fig):
     fig.savefig(buf, format="png", dpi=72)
     buf.seek(0)
     return Image.open(buf).convert("P", palette=Image.Palette.ADAPTIVE)
-
-
-def draw_path_overlay(
-    original: tuple[np.ndarray, np.ndarray],
-    built: tuple[np.ndarray, np.ndarray],
-    path: Path,
-    title: str,
-) -> Path:
-    """Writes a PNG of a linkage's foot path (x (A,), y (A,)) over its LEGO build's."""
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(6, 4.5))
-    ax = fig.add_axes((0.12, 0.12, 0.85, 0.8))
-    ax.plot(*original, "-o", color="0.5", ms=3, lw=1, label="simulated (evolved lengths)")
-    ax.plot(*built, "-x", color="tab:red", ms=4, lw=1.2, label="LEGO build (whole modules)")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.grid(True, lw=0.3)
-    ax.set_xlabel("x (LEGO modules)")
-    ax.set_ylabel("y (LEGO modules)")
-    ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7)
-    with atomic_path(Path(path)) as tmp:
-        fig.savefig(tmp, format="png", dpi=120)
-    return Path(path)

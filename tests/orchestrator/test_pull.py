@@ -67,7 +67,7 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(
         ["linkage.json", "linkage.png", "linkage.gif", "build_sheet.md", "build_sheet.csv",
-         "path_overlay.png"]
+         "path_overlay.png", "layers.png", "template.pdf"]
     )  # fmt: skip
     rows = list(csv.DictReader((out / "build_sheet.csv").open()))
     doc = to_document(genomes[valid[0]])
