@@ -12,6 +12,7 @@ import pandas as pd
 
 from orchestrator.config import ConfigError, from_dict, to_toml
 from orchestrator.report import figures as fig
+from orchestrator.report.checks import best_linkage_checks, checks_summary
 from orchestrator.report.findings import Finding, check_findings
 from orchestrator.report.html import render_html
 from orchestrator.report.load import GridData, load_grid
@@ -96,7 +97,8 @@ def build_report(
     """Returns the report of one grid (None: the latest), written to `out_dir`.
 
     Writes `<name>.png` and `<name>.pdf` per figure, `trials.csv`, `best_loss_summary.csv`,
-    `pairwise_tests.csv`, `findings.csv` and `report.html`, and logs them all under
+    `pairwise_tests.csv`, `findings.csv`, `best_linkage_checks.csv` (the physical checks of
+    each trial's best linkage) and `report.html`, and logs them all under
     `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
     """
     with tempfile.TemporaryDirectory(prefix="linkevo-report-") as cache:
@@ -106,6 +108,7 @@ def build_report(
         summary = summary_table(grid.trials)
         tests = pairwise_tests(grid.trials)
         findings = tuple(check_findings(grid, tests))
+        checks = best_linkage_checks(grid)
         made = report_figures(grid)
     files: list[Path] = []
     embedded = []
@@ -124,6 +127,7 @@ def build_report(
         "best_loss_summary.csv": summary,
         "pairwise_tests.csv": tests,
         "findings.csv": pd.DataFrame([f.__dict__ for f in findings]),
+        "best_linkage_checks.csv": checks,
     }
     for name, table in tables.items():
         path = out / name
@@ -140,6 +144,7 @@ def build_report(
         tests=tests,
         trials=trials,
         findings=findings,
+        checks=checks_summary(checks),
     )
     html_path = out / "report.html"
     write_bytes_atomic(html_path, page.encode("utf-8"))

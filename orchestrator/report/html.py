@@ -10,6 +10,7 @@ import pandas as pd
 
 from orchestrator.config import STUDY_EVALUATIONS
 from orchestrator.report.findings import HOLDS, REPRODUCED, Finding
+from sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG
 
 MIN_TRIALS_PER_CELL = 5
 """Below this many finished trials a cell's statistics are flagged as weak."""
@@ -28,7 +29,7 @@ figcaption { font-size: 0.85em; color: #444; margin-bottom: 2em; }
 """
 
 
-def _table(frame: pd.DataFrame) -> str:
+def table_html(frame: pd.DataFrame) -> str:
     """Returns an HTML table of `frame` (floats to 4 significant digits)."""
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
     rows = []
@@ -92,6 +93,7 @@ def render_html(
     tests: pd.DataFrame,
     trials: pd.DataFrame,
     findings: Sequence[Finding],
+    checks: pd.DataFrame,
 ) -> str:
     """Returns the report page; every image is inlined as a base64 PNG data URI.
 
@@ -106,6 +108,7 @@ def render_html(
         tests: `stats.pairwise_tests`.
         trials: per-trial table (trial_key, approach, fitness, status, error, best_loss).
         findings: `findings.check_findings`.
+        checks: `checks.checks_summary` of the best linkages' physical checks.
     """
     unfinished = trials[trials.status != "FINISHED"]
     parts = [
@@ -127,7 +130,7 @@ def render_html(
             f"<div class='warn'>{len(unfinished)} trials did not finish and are left out of "
             "the statistics and figures:</div>"
         )
-        parts.append(_table(unfinished[["trial_key", "status", "error"]].fillna("")))
+        parts.append(table_html(unfinished[["trial_key", "status", "error"]].fillna("")))
     parts.append("<h2>The study's findings on this grid</h2><table>")
     parts.append("<tr><th>claim</th><th>verdict</th><th>rule</th><th>evidence</th></tr>")
     for f in findings:
@@ -140,7 +143,7 @@ def render_html(
         )
     parts.append("</table>")
     parts.append("<h2>Best loss per approach and fitness</h2>")
-    parts.append(_table(summary))
+    parts.append(table_html(summary))
     parts.append(
         "<h2>Pairwise tests</h2><p>Two-sided Mann–Whitney U on the best-ever loss: exact "
         "where the pooled sample has no ties, else asymptotic (column <i>method</i>). "
@@ -148,7 +151,16 @@ def render_html(
         "approaches; <i>baseline</i>: each against RANDOM); A12 = P(loss_a &gt; loss_b) + "
         "P(=)/2, so A12 &lt; 0.5 means approach a tends to lower (better) losses.</p>"
     )
-    parts.append(_table(tests))
+    parts.append(table_html(tests))
+    parts.append(
+        "<h2>Can the best linkages be built?</h2><p>The physical checks of each trial's "
+        "best-ever linkage (<code>sim.physical</code>; per trial in "
+        "best_linkage_checks.csv): <i>buildable</i> linkages turn fully, pass no toggle "
+        f"position (transmission angle below {TOGGLE_DEG:g} deg) and stretch no beam by more "
+        f"than {BUILDABLE_STRETCH:g} modules within the simulation's tolerance. Size is the "
+        "larger side of the box the linkage sweeps, in modules.</p>"
+    )
+    parts.append(table_html(checks))
     for title, caption, png in figures:
         data = base64.b64encode(png).decode("ascii")
         parts.append(

@@ -21,6 +21,7 @@ from mlflow.entities import Metric, Param, RunTag
 from mlflow.tracking import MlflowClient
 
 from sim.descriptors import DESCRIPTOR_SPACES, cell_index
+from sim.linkage_doc import to_document
 
 N_GENES = 56
 N_ANGLES = 40
@@ -274,7 +275,11 @@ def write_grid(folder: Path, spec: GridSpec, server_uri: str | None = None) -> W
                     ]
                     for axis in ("x", "y")
                 }
-                (trial_dir / "best_linkage.json").write_text(json.dumps({"foot_path": path}))
+                # A real document of the best genome, carrying the drawn foot path (the
+                # report's path-size finding reads it; the physical checks read the genome).
+                genome = np.array(archive.column("genome")[best].as_py())
+                document = {**to_document(genome), "foot_path": path}
+                (trial_dir / "best_linkage.json").write_text(json.dumps(document))
                 (trial_dir / "settings.json").write_text(json.dumps({"approach": approach}))
                 for path in sorted(trial_dir.iterdir()):
                     client.log_artifact(run_id, str(path))

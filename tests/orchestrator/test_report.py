@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import socket
 import subprocess
 import sys
@@ -21,8 +22,13 @@ from scipy.stats import mannwhitneyu
 from orchestrator.cli import main
 from orchestrator.report import build_report, load_grid
 from orchestrator.report import figures as fig
+from orchestrator.report.checks import checks_summary
 from orchestrator.report.findings import NOT_TESTABLE, REPRODUCED, check_findings
+from orchestrator.report.html import table_html
 from orchestrator.report.stats import holm, pairwise_tests
+from sim import decode, simulate
+from sim.linkage_doc import from_document
+from sim.physical import physical_checks
 from tests.helpers.report import GridSpec, write_grid
 
 SPEC = GridSpec(
@@ -75,6 +81,28 @@ def test_summary_table_equals_values_recomputed_from_raw_metrics(grid):
         assert row.median == pytest.approx(median, rel=1e-12)
         assert row.iqr == pytest.approx(q3 - q1, rel=1e-9, abs=1e-12)
         assert row.min == pytest.approx(values.min(), rel=1e-12)
+
+
+def test_best_linkages_physical_checks_match_their_genomes(grid, loaded):
+    _, result = grid
+    table = pd.read_csv(result.out_dir / "best_linkage_checks.csv")
+    finished = loaded.finished()
+    assert sorted(table.trial_key) == sorted(finished.trial_key)
+    keyed = finished.set_index("trial_key")
+    genomes = np.stack(
+        [from_document(json.loads(Path(keyed.best_linkage[k]).read_text()))[0]
+         for k in table.trial_key]
+    )  # fmt: skip
+    batch = decode(genomes, "paper")
+    checks = physical_checks(batch, simulate(batch))
+    assert table.buildable.tolist() == checks.buildable.tolist()
+    assert table.toggle_passages.tolist() == checks.toggle_passages.tolist()
+    assert np.allclose(table.size_modules, checks.size_modules.max(axis=1))
+    page = result.html.read_text()
+    assert "Can the best linkages be built?" in page
+    summary = checks_summary(table)
+    assert summary.buildable.sum() == checks.buildable.sum()
+    assert table_html(summary) in page
 
 
 def test_failed_and_missing_trials_are_marked_not_counted(grid):

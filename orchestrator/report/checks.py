@@ -1,0 +1,92 @@
+"""Provides the physical checks (`sim.physical`) of a grid's best linkages, per trial and per
+approach and fitness: which of the study's answers a builder could build as simulated."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, GridData, ordered
+from sim import decode, simulate
+from sim.linkage_doc import from_document
+from sim.physical import physical_checks
+
+TRIAL_CHECK_COLUMNS: tuple[str, ...] = (
+    "trial_key",
+    "approach",
+    "fitness",
+    "best_loss",
+    "buildable",
+    "turns_fully",
+    "min_transmission_deg",
+    "toggle_passages",
+    "max_stretch",
+    "size_modules",
+)
+
+
+def best_linkage_checks(grid: GridData) -> pd.DataFrame:
+    """Returns the checks of each finished trial's best-ever linkage (its document).
+
+    Returns:
+        TRIAL_CHECK_COLUMNS, one row per finished trial with a readable best-linkage
+        document; size_modules is the larger of the swept box's width and height.
+    """
+    trials = grid.finished()
+    trials = trials[trials.best_linkage.notna()].reset_index(drop=True)
+    decoded = [_read(path) for path in trials.best_linkage]
+    trials = trials[[d is not None for d in decoded]].reset_index(drop=True)
+    decoded = [d for d in decoded if d is not None]
+    if trials.empty:
+        return pd.DataFrame(columns=list(TRIAL_CHECK_COLUMNS))
+    n_angles = int(grid.config.get("n_angles", 40))
+    parts = []
+    for mode in sorted({mode for _, mode in decoded}):
+        rows = [i for i, (_, m) in enumerate(decoded) if m == mode]
+        batch = decode(np.stack([decoded[i][0] for i in rows]), mode)
+        checks = physical_checks(batch, simulate(batch, n_angles))
+        parts.append(
+            pd.DataFrame(
+                {
+                    "row": rows,
+                    "buildable": checks.buildable,
+                    "turns_fully": checks.turns_fully,
+                    "min_transmission_deg": checks.min_transmission_deg,
+                    "toggle_passages": checks.toggle_passages,
+                    "max_stretch": checks.max_stretch,
+                    "size_modules": checks.size_modules.max(axis=1),
+                }
+            )
+        )
+    found = pd.concat(parts).sort_values("row").set_index("row")
+    return pd.concat([trials[["trial_key", "approach", "fitness", "best_loss"]], found], axis=1)
+
+
+def _read(path: str) -> tuple[np.ndarray, str] | None:
+    """Returns (genome, mode) of a linkage document, or None when it is not one."""
+    try:
+        return from_document(json.loads(Path(path).read_text(encoding="utf-8")))
+    except (ValueError, KeyError, OSError):
+        return None
+
+
+def checks_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """Returns, per approach and fitness (in the study's order), how many best linkages
+    are buildable and the medians of their transmission angle, stretch and size."""
+    approaches = ordered(table.approach, APPROACH_ORDER)
+    fitnesses = ordered(table.fitness, FITNESS_ORDER)
+    table = table.assign(
+        _a=table.approach.map(approaches.index), _f=table.fitness.map(fitnesses.index)
+    ).sort_values(["_a", "_f"], kind="stable")
+    grouped = table.groupby(["approach", "fitness"], sort=False)
+    return grouped.agg(
+        trials=("trial_key", "size"),
+        buildable=("buildable", "sum"),
+        turn_fully=("turns_fully", "sum"),
+        median_min_transmission_deg=("min_transmission_deg", "median"),
+        median_max_stretch=("max_stretch", "median"),
+        median_size_modules=("size_modules", "median"),
+    ).reset_index()
