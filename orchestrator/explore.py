@@ -20,6 +20,7 @@ import gzip
 import html
 import json
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -256,20 +257,24 @@ def explore(
     title: str,
     drawn: int | None = None,
     log_to: str | None = None,
+    progress: Callable[[int, TrialRun], None] | None = None,
 ) -> Path:
     """Writes the explorer page of `trials` to `out` and returns it.
 
     Args:
         drawn: per trial, draw only the `drawn` lowest-loss cells (None: all).
         log_to: a run id to log the page to as `explorer.html` (None: do not log).
+        progress: called with (trials done, trial) after each trial is read.
     """
     from workers.linkages import repertoire
 
     views = []
     with tempfile.TemporaryDirectory(prefix="linkevo-explore-") as tmp:
-        for trial in trials:
+        for done, trial in enumerate(trials, 1):
             table = repertoire(client, trial.run_id, Path(tmp) / trial.run_id)
             views.append(repertoire_view(table, trial, drawn))
+            if progress is not None:
+                progress(done, trial)
         write_bytes_atomic(out, render_page(title, views).encode("utf-8"))
         if log_to is not None:
             named = Path(tmp) / PAGE_ARTIFACT

@@ -30,8 +30,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="K",
         help="draw the linkages of each trial's K lowest-loss cells only (default: every "
-        "cell of a trial; the 1000 best per trial on a grid's page, which keeps the page "
-        "of a study-budget grid near 20 MB)",
+        "cell of a trial; the 500 best per trial on a grid's page, which makes the page of "
+        "a study-budget grid about 33 MB)",
     )
     parser.add_argument("--experiment", default="linkevo", help="MLflow experiment")
     parser.add_argument(
@@ -48,6 +48,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo explore`."""
+    import os
+    import sys
+
     from mlflow.tracking import MlflowClient
 
     from orchestrator.explore import GRID_DRAWN, ExploreError, explore, grid_trials, trial_run
@@ -77,8 +80,14 @@ def handle(args: argparse.Namespace) -> int:
     except ExploreError as exc:
         raise CliError(str(exc)) from exc
     out.parent.mkdir(parents=True, exist_ok=True)
-    explore(client, trials, out, title=title, drawn=drawn, log_to=None if args.no_log else log_to)
+    os.environ["MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR"] = "false"  # one line per trial instead
+
+    def progress(done: int, trial) -> None:
+        print(f"[{done}/{len(trials)}] {trial.trial_key} (run {trial.run_id})", file=sys.stderr)
+
+    log_to = None if args.no_log else log_to
+    explore(client, trials, out, title=title, drawn=drawn, log_to=log_to, progress=progress)
     print(out)
-    if not args.no_log:
+    if log_to is not None:
         print(f"logged as explorer.html to run {log_to}")
     return 0

@@ -117,7 +117,9 @@ def test_explore_writes_an_offline_page_and_logs_it_to_the_run(store, tmp_path, 
     assert views[0]["drawn"] == len(views[0]["cells"])
     logged = [a.path for a in MlflowClient(uri).list_artifacts(runs["MAP-LIS"])]
     assert "explorer.html" in logged
-    assert f"logged as explorer.html to run {runs['MAP-LIS']}" in capsys.readouterr().out
+    said = capsys.readouterr()
+    assert f"logged as explorer.html to run {runs['MAP-LIS']}" in said.out
+    assert f"[1/1] MAP-LIS/Fp/00 (run {runs['MAP-LIS']})" in said.err
 
 
 def test_explore_a_grid_puts_every_repertoire_trial_on_one_page(store, tmp_path):
