@@ -32,6 +32,16 @@ def crashing_evaluator() -> type[CrashingEvaluator]:
     return CrashingEvaluator
 
 
+@pytest.fixture
+def mlflow_server(tmp_path):
+    """A real `mlflow server` on loopback; yields its URI. Its sqlite store and proxied
+    artefacts lie in tmp_path/mlflow-server (artefacts in its artefacts/ folder)."""
+    from tests.helpers.mlflow_server import mlflow_server as serve
+
+    with serve(tmp_path / "mlflow-server") as uri:
+        yield uri
+
+
 @pytest.fixture(scope="module")
 def ray_local():
     """One small local Ray instance for the whole test module."""

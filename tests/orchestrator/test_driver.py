@@ -4,13 +4,10 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import signal
-import socket
 import subprocess
 import sys
 import time
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -129,41 +126,6 @@ def test_failed_trial_is_reported_and_the_others_finish(ray_local, tmp_path):
     assert "failed trials:" in summary(result, grid.config)
 
 
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
-@pytest.fixture
-def mlflow_server(tmp_path):
-    """A real `mlflow server` on loopback, with its own sqlite store and artefact folder."""
-    port = free_port()
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "mlflow", "server",
-         "--backend-store-uri", f"sqlite:///{tmp_path / 'server.db'}",
-         "--artifacts-destination", str(tmp_path / "server-artifacts"),
-         "--host", "127.0.0.1", "--port", str(port), "--workers", "1"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-        env={**os.environ, "MLFLOW_TRACKING_URI": ""},
-    )  # fmt: skip
-    uri = f"http://127.0.0.1:{port}"
-    deadline = time.monotonic() + 90
-    while True:
-        try:
-            with urllib.request.urlopen(uri + "/health", timeout=2) as response:
-                if response.status == 200:
-                    break
-        except OSError:
-            pass
-        assert proc.poll() is None, "mlflow server exited"
-        assert time.monotonic() < deadline, "mlflow server did not answer /health"
-        time.sleep(0.5)
-    yield uri
-    proc.terminate()
-    proc.wait(timeout=30)
-
-
 def test_grid_logs_through_an_mlflow_server_over_http(ray_local, tmp_path, mlflow_server):
     grid = tiny_grid(
         tmp_path,
@@ -177,7 +139,7 @@ def test_grid_logs_through_an_mlflow_server_over_http(ray_local, tmp_path, mlflo
     assert result.tracking_uri == mlflow_server
     check_trial_runs(mlflow_server, grid, result, tmp_path)
     assert list((tmp_path / "work" / "trials" / grid.grid_id).iterdir()) == []
-    assert (tmp_path / "server-artifacts").is_dir()
+    assert (tmp_path / "mlflow-server" / "artefacts").is_dir()  # the server holds them
 
 
 def poll_finished(uri: str, grid_id: str, at_least: int, proc: subprocess.Popen) -> set[str]:

@@ -275,3 +275,36 @@ def test_grid_page_in_chromium_picks_a_trial(store, tmp_path, browser):
     _point_at(browser, cell["c"], click=True)
     said = _text(browser, "selected-info")
     assert f"MAP-ST/Fp/00, cell {cell['c']}: loss {cell['l']:.4f}" in said
+
+
+def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, mlflow_server):
+    from selenium.webdriver.common.by import By
+
+    uri, runs = store
+    source = MlflowClient(uri).get_run(runs["MAP-LIS"])
+    served = MlflowClient(mlflow_server)
+    experiment = ensure_experiment(mlflow_server)
+    run_id = served.create_run(experiment, tags=source.data.tags).info.run_id
+    served.log_batch(run_id, params=[Param(k, v) for k, v in source.data.params.items()])
+    table = repertoire(MlflowClient(uri), runs["MAP-LIS"], tmp_path)
+    table.to_parquet(tmp_path / "repertoire.parquet")
+    served.log_artifact(run_id, str(tmp_path / "repertoire.parquet"))
+    out = tmp_path / "page.html"
+    assert main(["explore", run_id, "--tracking-uri", mlflow_server, "--out", str(out)]) == 0
+    cell = _page_views(out)[0]["cells"][0]
+
+    browser.get(f"{mlflow_server}/#/experiments/{experiment}/runs/{run_id}/artifacts/explorer.html")
+    deadline = time.monotonic() + 60
+    while not browser.find_elements(By.TAG_NAME, "iframe"):  # MLflow's HTML artefact view
+        assert time.monotonic() < deadline, "the MLflow UI did not show explorer.html"
+        time.sleep(0.2)
+    browser.switch_to.frame(browser.find_element(By.TAG_NAME, "iframe"))
+    try:
+        while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
+            assert time.monotonic() < deadline, "the page did not run inside the MLflow UI"
+            time.sleep(0.1)
+        browser.execute_script("document.getElementById('map').scrollIntoView()")
+        _point_at(browser, cell["c"], click=True)
+        assert _text(browser, "pull-command") == f"linkevo pull {run_id}:{cell['c']}"
+    finally:
+        browser.switch_to.default_content()
