@@ -82,8 +82,9 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
         l (loss), d (descriptors, D), e (failed angles), k (checks: turns fully, buildable,
         smallest transmission angle in degrees, toggle passages, largest stretch, width and
         height in modules) and g (the drawing, or None): n (nodes at the first assembled
-        angle, (12, 2), None for absent nodes), t (node kinds), m (beams: start, end, kind,
-        length, modules rounded on their own), f (foot path x and y, (2, A)).
+        angle, (12, 2)), t (node kinds, (12,)), m (beams: start, end, kind, length, modules
+        rounded on their own), f (foot path x and y, (2, A), None at failed angles).
+        Positions are rounded to 0.1 module, lengths to 0.01, descriptors to 0.001.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
     bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))
