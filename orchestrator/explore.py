@@ -30,7 +30,7 @@ import pandas as pd
 
 from algorithms.factory import REPERTOIRE_APPROACHES
 from orchestrator.pull import own_modules
-from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, search_trial_runs
+from orchestrator.report.load import in_study_order, search_trial_runs
 from sim import decode, simulate
 from sim.decode import BEAM_KINDS, NODE_KINDS
 from sim.descriptors import DESCRIPTOR_SPACES
@@ -238,16 +238,9 @@ def grid_trials(client, grid_id: str, experiment: str) -> list[TrialRun]:
             f"grid {grid_id} has no finished trial of {', '.join(REPERTOIRE_APPROACHES)} to explore"
         )
 
-    def order(row) -> tuple:
-        approach, fitness = row["tags.approach"], row["tags.fitness"]
-        return (
-            APPROACH_ORDER.index(approach) if approach in APPROACH_ORDER else len(APPROACH_ORDER),
-            FITNESS_ORDER.index(fitness) if fitness in FITNESS_ORDER else len(FITNESS_ORDER),
-            int(row.get("tags.trial_index", 0) or 0),
-        )
-
-    rows = sorted((row for _, row in runs.iterrows()), key=order)
-    return [trial_run(client, row.run_id) for row in rows]
+    then = "tags.trial_index" if "tags.trial_index" in runs else None
+    runs = in_study_order(runs, "tags.approach", "tags.fitness", then)
+    return [trial_run(client, run_id) for run_id in runs.run_id]
 
 
 def explore(

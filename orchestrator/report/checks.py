@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, GridData, ordered
+from orchestrator.report.load import GridData, in_study_order
 from sim import decode, simulate
 from sim.linkage_doc import from_document
 from sim.physical import physical_checks
@@ -76,11 +76,7 @@ def _read(path: str) -> tuple[np.ndarray, str] | None:
 def checks_summary(table: pd.DataFrame) -> pd.DataFrame:
     """Returns, per approach and fitness (in the study's order), how many best linkages
     are buildable and the medians of their transmission angle, stretch and size."""
-    approaches = ordered(table.approach, APPROACH_ORDER)
-    fitnesses = ordered(table.fitness, FITNESS_ORDER)
-    table = table.assign(
-        _a=table.approach.map(approaches.index), _f=table.fitness.map(fitnesses.index)
-    ).sort_values(["_a", "_f"], kind="stable")
+    table = in_study_order(table)
     grouped = table.groupby(["approach", "fitness"], sort=False)
     return grouped.agg(
         trials=("trial_key", "size"),

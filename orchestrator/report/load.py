@@ -98,6 +98,25 @@ def ordered(values: Iterable[str], order: tuple[str, ...]) -> list[str]:
     return [v for v in order if v in values] + sorted(values - set(order))
 
 
+def in_study_order(
+    frame: pd.DataFrame,
+    approach: str = "approach",
+    fitness: str = "fitness",
+    then: str | None = None,
+) -> pd.DataFrame:
+    """Returns `frame`'s rows by approach and fitness in the study's order (`ordered`),
+    then by the numeric column `then` when given; stable otherwise."""
+    approaches = ordered(frame[approach].fillna(""), APPROACH_ORDER)
+    fitnesses = ordered(frame[fitness].fillna(""), FITNESS_ORDER)
+    keys = {
+        "_approach": frame[approach].fillna("").map(approaches.index),
+        "_fitness": frame[fitness].fillna("").map(fitnesses.index),
+    }
+    if then is not None:
+        keys["_then"] = pd.to_numeric(frame[then], errors="coerce").fillna(0)
+    return frame.assign(**keys).sort_values(list(keys), kind="stable").drop(columns=list(keys))
+
+
 def find_grid_run(client, grid_id: str | None, experiment: str) -> tuple[str, str]:
     """Returns (grid_id, parent_run_id) of `grid_id`, or of the latest grid when None.
 
