@@ -19,6 +19,7 @@ import base64
 import gzip
 import html
 import json
+import shutil
 import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -34,7 +35,7 @@ from orchestrator.report.load import in_study_order, search_trial_runs
 from sim import decode, simulate
 from sim.decode import BEAM_KINDS, NODE_KINDS
 from sim.descriptors import DESCRIPTOR_SPACES
-from sim.linkage_doc import DEFAULT_UNIT_MM
+from sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from workers.artifacts import write_bytes_atomic
 
@@ -59,12 +60,6 @@ class TrialRun:
     fitness: str
     mode: str
     n_angles: int
-
-
-def _rounded(values: np.ndarray, decimals: int) -> list:
-    """Returns `values` rounded, as (nested) lists with None for NaN (JSON has no NaN)."""
-    values = np.round(np.asarray(values, dtype=np.float64), decimals)
-    return np.where(np.isfinite(values), values, None).tolist()
 
 
 def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = None) -> dict:
@@ -105,15 +100,15 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
     k = [
         checks.turns_fully.astype(int).tolist(),
         checks.buildable.astype(int).tolist(),
-        _rounded(checks.min_transmission_deg, 1),
+        json_floats(checks.min_transmission_deg, 1),
         checks.toggle_passages.tolist(),
-        _rounded(checks.max_stretch, 3),
-        _rounded(checks.size_modules[:, 0], 1),
-        _rounded(checks.size_modules[:, 1], 1),
+        json_floats(checks.max_stretch, 3),
+        json_floats(checks.size_modules[:, 0], 1),
+        json_floats(checks.size_modules[:, 1], 1),
     ]
     bins = table[bin_columns].to_numpy().astype(int).tolist()
-    descriptors = _rounded(table[desc_columns].to_numpy(), 3)
-    loss = _rounded(table["loss"].to_numpy(), 4)
+    descriptors = json_floats(table[desc_columns].to_numpy(), 3)
+    loss = json_floats(table["loss"].to_numpy(), 4)
     error = table["error"].to_numpy().astype(int).tolist()
     cells = []
     for i, cell in enumerate(table["cell"].to_numpy().astype(int).tolist()):
@@ -122,7 +117,7 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
             n_beams = int(batch.n_beams[i])
             lengths = batch.beam_length[i, :n_beams]
             drawing = {
-                "n": _rounded(nodes[i], 1),
+                "n": json_floats(nodes[i], 1),
                 "t": batch.node_kind[i].tolist(),
                 "m": [
                     [int(s), int(e), int(kind), round(float(length), 2), modules]
@@ -135,7 +130,7 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
                         strict=True,
                     )
                 ],
-                "f": _rounded(foot[i].T, 1),
+                "f": json_floats(foot[i].T, 1),
             }
         cells.append(
             {
@@ -271,7 +266,6 @@ def explore(
                 progress(done, trial)
         write_bytes_atomic(out, render_page(title, views).encode("utf-8"))
         if log_to is not None:
-            named = Path(tmp) / PAGE_ARTIFACT
-            named.write_bytes(out.read_bytes())
+            named = shutil.copyfile(out, Path(tmp) / PAGE_ARTIFACT)  # the name it is logged as
             client.log_artifact(log_to, str(named))
     return out

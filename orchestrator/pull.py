@@ -187,7 +187,7 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
         "loss": q.loss,
         "original_loss": q.original_loss,
         "checks": q.checks.row(0),
-        "nodes": [json_floats(p) for p in q.motion.positions[0, :, first]],
+        "nodes": json_floats(q.motion.positions[0, :, first]),
         "foot_path": {"x": json_floats(q.foot_x), "y": json_floats(q.foot_y)},
         "original_path": {"x": json_floats(q.original_x), "y": json_floats(q.original_y)},
     }

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from sim import kernels
@@ -122,9 +120,14 @@ def from_document(doc: dict) -> tuple[np.ndarray, str]:
     return genome, mode
 
 
-def json_floats(values: np.ndarray) -> list[float | None]:
-    """Returns values (A,) as a JSON list, None where NaN (a failed crank angle)."""
-    return [None if math.isnan(v) else float(v) for v in values]
+def json_floats(values: np.ndarray, decimals: int | None = None) -> list:
+    """Returns values (any shape) as nested JSON lists of floats, None where NaN (a failed
+    crank angle), rounded to `decimals` when given. `np.array(lists, dtype=float)` reads
+    them back with NaN for None."""
+    values = np.asarray(values, dtype=np.float64)
+    if decimals is not None:
+        values = np.round(values, decimals)
+    return np.where(np.isfinite(values), values, None).tolist()
 
 
 def batch_from_document(doc: dict) -> LinkageBatch:

@@ -75,7 +75,7 @@ def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> N
     from matplotlib.patches import Circle, Polygon
 
     lego = doc["lego"]
-    nodes = np.array([[np.nan if v is None else v for v in p] for p in lego["nodes"]], float)
+    nodes = np.array(lego["nodes"], dtype=float)  # NaN where None
     for beam, modules, layer in zip(doc["beams"], lego["lengths"], lego["layers"], strict=True):
         a, b = nodes[beam["start"]], nodes[beam["end"]]
         if only_layer is not None and layer != only_layer:
@@ -103,7 +103,7 @@ def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> N
 
 def _bounds(doc: dict) -> tuple[np.ndarray, np.ndarray]:
     """Returns the (2,) lower and upper corners of a build's drawing, modules."""
-    nodes = np.array([[np.nan if v is None else v for v in p] for p in doc["lego"]["nodes"]])
+    nodes = np.array(doc["lego"]["nodes"], dtype=float)  # NaN where None
     nodes = nodes[np.isfinite(nodes).all(axis=1)]
     pad = BEAM_HALF_WIDTH + 0.5
     return nodes.min(axis=0) - pad, nodes.max(axis=0) + pad

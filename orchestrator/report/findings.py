@@ -90,8 +90,7 @@ def best_path_sizes(grid: GridData) -> pd.DataFrame:
     rows = []
     for trial in trials[trials.best_linkage.notna()].itertuples():
         path = json.loads(Path(trial.best_linkage).read_text())["foot_path"]
-        x = np.array([np.nan if v is None else v for v in path["x"]], dtype=float)
-        y = np.array([np.nan if v is None else v for v in path["y"]], dtype=float)
+        x, y = np.array(path["x"], dtype=float), np.array(path["y"], dtype=float)  # None: NaN
         if np.isfinite(x).any():
             size = max(np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y))
             rows.append((trial.trial_key, trial.approach, trial.fitness, float(size)))

@@ -92,7 +92,7 @@ def test_view_holds_every_cell_with_its_checks_and_drawing(store, tmp_path):
         ]
         assert [m[4] for m in g["m"]] == [max(round(v), 1) for v in batch.beam_length[i, :n_beams]]
         foot = motion.positions[i, motion.foot[i]]
-        drawn = np.array([[np.nan if v is None else v for v in axis] for axis in g["f"]])
+        drawn = np.array(g["f"], dtype=float)  # None: NaN
         assert np.allclose(drawn.T, foot, atol=0.051, equal_nan=True)
     _, few = _view(uri, runs["MAP-ST"], "MAP-ST", tmp_path / "few", drawn=5)
     assert [c["g"] is not None for c in few["cells"]] == [i < 5 for i in range(len(cells))]
