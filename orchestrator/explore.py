@@ -31,7 +31,7 @@ import pandas as pd
 
 from algorithms.factory import REPERTOIRE_APPROACHES
 from orchestrator.pull import own_modules
-from orchestrator.report.load import in_study_order, search_trial_runs
+from orchestrator.report.load import in_study_order, latest_per_trial, search_trial_runs
 from sim import decode, simulate
 from sim.decode import BEAM_KINDS, NODE_KINDS
 from sim.descriptors import DESCRIPTOR_SPACES
@@ -226,8 +226,8 @@ def grid_trials(client, grid_id: str, experiment: str) -> list[TrialRun]:
     runs = search_trial_runs(client, grid_id, experiment)
     if runs.empty or "tags.approach" not in runs:
         raise ExploreError(f"grid {grid_id} has no trial runs")
+    runs = latest_per_trial(runs)
     runs = runs[(runs.status == "FINISHED") & runs["tags.approach"].isin(REPERTOIRE_APPROACHES)]
-    runs = runs.drop_duplicates("tags.trial_key")
     if runs.empty:
         raise ExploreError(
             f"grid {grid_id} has no finished trial of {', '.join(REPERTOIRE_APPROACHES)} to explore"

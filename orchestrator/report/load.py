@@ -165,7 +165,7 @@ def load_grid(
     runs = search_trial_runs(client, grid_id, experiment)
     parent = client.get_run(parent_id)
     config = _grid_config(parent, cache_dir, tracking_uri)
-    runs = _latest_per_trial(runs)
+    runs = latest_per_trial(runs)
     with ThreadPoolExecutor(DOWNLOAD_THREADS) as pool:
         fetched = list(
             pool.map(
@@ -226,7 +226,7 @@ def _grid_config(parent, cache_dir: Path, tracking_uri: str) -> dict:
     return dict(parent.data.params)
 
 
-def _latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
+def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
     """Returns one run per trial key: a FINISHED one if any, else the latest started."""
     if runs.empty:
         return pd.DataFrame(columns=["run_id", "status", "artifact_uri", "start_time"])
