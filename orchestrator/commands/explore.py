@@ -53,10 +53,23 @@ def handle(args: argparse.Namespace) -> int:
 
     from mlflow.tracking import MlflowClient
 
-    from orchestrator.explore import GRID_DRAWN, ExploreError, explore, grid_trials, trial_run
+    from orchestrator.commands.report import GRID_ID
+    from orchestrator.explore import (
+        GRID_DRAWN,
+        PAGE_ARTIFACT,
+        ExploreError,
+        explore,
+        grid_trials,
+        trial_run,
+    )
     from orchestrator.report.load import GridNotFoundError, find_grid_run
     from workers.tracking import require_store, resolve_tracking_uri
 
+    if not GRID_ID.fullmatch(args.ref):  # it goes into an MLflow filter string
+        raise CliError(
+            f"{args.ref!r} is neither a run id nor a grid id; allowed: letters, digits, '.', "
+            "'_', '-'"
+        )
     if args.drawn is not None and args.drawn < 1:
         raise CliError(f"--drawn {args.drawn}: give the number of cells to draw, >= 1")
     out = args.out if args.out is not None else Path("reports") / "explore" / f"{args.ref}.html"
@@ -89,5 +102,5 @@ def handle(args: argparse.Namespace) -> int:
     explore(client, trials, out, title=title, drawn=drawn, log_to=log_to, progress=progress)
     print(out)
     if log_to is not None:
-        print(f"logged as explorer.html to run {log_to}")
+        print(f"logged as {PAGE_ARTIFACT} to run {log_to}")
     return 0

@@ -149,6 +149,7 @@ def test_explore_refuses_bad_input_before_writing(store, tmp_path, capsys):
         ),
         (["ffff00001111"], f"known grids: ['{GRID}']"),
         ([runs["MAP-ST"], "--drawn", "0"], "--drawn 0: give the number of cells to draw, >= 1"),
+        (["it's"], '"it\'s" is neither a run id nor a grid id; allowed: letters, digits'),
     ]
     for extra, message in cases:
         assert main(["explore", *extra, "--tracking-uri", uri, "--out", str(out)]) == 2
