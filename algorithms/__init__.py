@@ -1,8 +1,8 @@
 """linkevo's search algorithms: ask/tell optimisers on numpy arrays (no Ray, MLflow or files)."""
 
-from algorithms.archive import GridArchive, elite_rows
-from algorithms.ea import EvolutionaryAlgorithm
-from algorithms.factory import (
+from linkevo.algorithms.archive import GridArchive, elite_rows
+from linkevo.algorithms.ea import EvolutionaryAlgorithm
+from linkevo.algorithms.factory import (
     APPROACHES,
     MAP_ELITES,
     MULTI_OBJECTIVE,
@@ -11,22 +11,27 @@ from algorithms.factory import (
     eval_fitness,
     make_optimizer,
 )
-from algorithms.individuals import Individuals
-from algorithms.map_elites import MapElites
-from algorithms.mutation import bounce_back, initial_sigma, mutate
-from algorithms.nsga2 import NSGA2
-from algorithms.optimizer import BaseOptimizer, Optimizer
-from algorithms.pareto import crowding_distance, hypervolume_2d, non_dominated_ranks, select_nsga2
-from algorithms.population import PopulationOptimizer
-from algorithms.random_sampling import RandomSampling
-from algorithms.scoring import (
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.map_elites import MapElites
+from linkevo.algorithms.mutation import bounce_back, initial_sigma, mutate
+from linkevo.algorithms.nsga2 import NSGA2
+from linkevo.algorithms.optimizer import BaseOptimizer, Optimizer
+from linkevo.algorithms.pareto import (
+    crowding_distance,
+    hypervolume_2d,
+    non_dominated_ranks,
+    select_nsga2,
+)
+from linkevo.algorithms.population import PopulationOptimizer
+from linkevo.algorithms.random_sampling import RandomSampling
+from linkevo.algorithms.scoring import (
     HV_REFERENCES,
     QD_OFFSETS,
     SINGLE_FITNESSES,
     TWO_OBJECTIVE,
     scalar_loss,
 )
-from algorithms.selection import tournament
+from linkevo.algorithms.selection import tournament
 
 __all__ = [
     "APPROACHES",

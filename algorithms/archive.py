@@ -8,12 +8,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from algorithms import scoring
-from algorithms.individuals import Individuals
-from sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
+from linkevo.algorithms import scoring
+from linkevo.algorithms.individuals import Individuals
+from linkevo.sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
 
 if TYPE_CHECKING:
-    from algorithms.ribs_grid import PublishedGrid
+    from linkevo.algorithms.ribs_grid import PublishedGrid
 
 _RIBS_NAMES = {"genome": "solution", "loss": "objective", "desc": "measures"}
 """Individuals fields that pyribs stores under its own names (the rest are extra fields)."""
@@ -120,7 +120,7 @@ class GridArchive:
         if self._grid is None:
             # pyribs imports torch and scikit-learn (about 3 s), so it is loaded by the first
             # insertion: the CLI, config checks and the other approaches do not pay for it.
-            from algorithms.ribs_grid import PublishedGrid
+            from linkevo.algorithms.ribs_grid import PublishedGrid
 
             self._grid = PublishedGrid(
                 space=self._space,

@@ -8,11 +8,11 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 import torch
 
-from algorithms.aurora_model import PathAutoencoder
-from algorithms.aurora_paths import check_representation, prepare_paths, valid_rows
-from algorithms.individuals import Individuals
-from algorithms.map_elites import MapElites
-from sim.evaluation import Evaluation
+from linkevo.algorithms.aurora_model import PathAutoencoder
+from linkevo.algorithms.aurora_paths import check_representation, prepare_paths, valid_rows
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.map_elites import MapElites
+from linkevo.sim.evaluation import Evaluation
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 """Where the autoencoder trains: "auto" takes a GPU when torch sees one, else the CPU."""

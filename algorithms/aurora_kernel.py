@@ -18,7 +18,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sim.kernels import NOALIAS
+from linkevo.sim.kernels import NOALIAS
 
 LANES = 16
 """float32 lanes of one 512-bit vector: the batch is padded to a multiple of this."""

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from algorithms.aurora_kernel import epoch_workspace, train_epoch
+from linkevo.algorithms.aurora_kernel import epoch_workspace, train_epoch
 
 HIDDEN_SIZES: tuple[int, ...] = (64, 48, 32, 16, 4, 16, 32, 48, 64)
 """Units of the hidden layers; the 4-unit layer is the sigmoid bottleneck."""

@@ -11,7 +11,7 @@ import itertools
 import numpy as np
 import torch
 
-from algorithms.aurora_model import (
+from linkevo.algorithms.aurora_model import (
     BOTTLENECK,
     EPSILON,
     INITIAL_ACCUMULATOR,

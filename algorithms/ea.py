@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms.individuals import Individuals
-from algorithms.population import PopulationOptimizer
-from algorithms.selection import tournament
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.population import PopulationOptimizer
+from linkevo.algorithms.selection import tournament
 
 TOURNAMENT_SIZE = 3
 

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from algorithms.ea import EvolutionaryAlgorithm
-from algorithms.map_elites import MapElites
-from algorithms.nsga2 import NSGA2
-from algorithms.optimizer import Optimizer
-from algorithms.random_sampling import RandomSampling
-from algorithms.scoring import evaluated_fitness
+from linkevo.algorithms.ea import EvolutionaryAlgorithm
+from linkevo.algorithms.map_elites import MapElites
+from linkevo.algorithms.nsga2 import NSGA2
+from linkevo.algorithms.optimizer import Optimizer
+from linkevo.algorithms.random_sampling import RandomSampling
+from linkevo.algorithms.scoring import evaluated_fitness
 
 MAP_ELITES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
 """The MAP-Elites approaches of the study (each with its own descriptor grid)."""
@@ -69,7 +69,7 @@ def make_optimizer(
         "n_angles": n_angles,
     }
     if approach == "MAP-AU":
-        from algorithms.aurora import AuroraMapElites
+        from linkevo.algorithms.aurora import AuroraMapElites
 
         return AuroraMapElites(**common, **options)
     if approach not in _OPTIONS:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms.archive import GridArchive
-from algorithms.individuals import Individuals
-from algorithms.optimizer import BaseOptimizer
-from sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
-from sim.evaluation import Evaluation
+from linkevo.algorithms.archive import GridArchive
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.optimizer import BaseOptimizer
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.sim.evaluation import Evaluation
 
 
 class MapElites(BaseOptimizer):

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms.individuals import Individuals
-from algorithms.pareto import hypervolume_2d, select_nsga2
-from algorithms.population import PopulationOptimizer
-from algorithms.scoring import HV_REFERENCES
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.pareto import hypervolume_2d, select_nsga2
+from linkevo.algorithms.population import PopulationOptimizer
+from linkevo.algorithms.scoring import HV_REFERENCES
 
 
 class NSGA2(PopulationOptimizer):

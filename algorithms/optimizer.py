@@ -7,12 +7,12 @@ from typing import Protocol
 
 import numpy as np
 
-from algorithms.individuals import Individuals
-from algorithms.mutation import initial_sigma, mutate, n_sigmas
-from algorithms.rng_state import decode_rng, encode_rng
-from algorithms.scoring import QD_OFFSETS, SINGLE_FITNESSES, evaluated_fitness, scalar_loss
-from sim.evaluation import Evaluation
-from sim.genome import random_genomes
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.mutation import initial_sigma, mutate, n_sigmas
+from linkevo.algorithms.rng_state import decode_rng, encode_rng
+from linkevo.algorithms.scoring import QD_OFFSETS, SINGLE_FITNESSES, evaluated_fitness, scalar_loss
+from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.genome import random_genomes
 
 
 class Optimizer(Protocol):

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms import scoring
-from algorithms.archive import elite_rows
-from algorithms.individuals import Individuals
-from algorithms.optimizer import BaseOptimizer
-from sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES, bin_descriptors, cell_index
-from sim.evaluation import Evaluation
+from linkevo.algorithms import scoring
+from linkevo.algorithms.archive import elite_rows
+from linkevo.algorithms.individuals import Individuals
+from linkevo.algorithms.optimizer import BaseOptimizer
+from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES, bin_descriptors, cell_index
+from linkevo.sim.evaluation import Evaluation
 
 
 class PopulationOptimizer(BaseOptimizer):

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms.map_elites import MapElites
-from sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
-from sim.evaluation import Evaluation
+from linkevo.algorithms.map_elites import MapElites
+from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
+from linkevo.sim.evaluation import Evaluation
 
 
 class RandomSampling(MapElites):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from ribs.archives import GridArchive
 
-from sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
+from linkevo.sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
 
 
 class PublishedGrid(GridArchive):

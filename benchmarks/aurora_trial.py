@@ -21,12 +21,12 @@ from dataclasses import fields
 import numpy as np
 import torch
 
-from algorithms.aurora import AuroraMapElites, AuroraSettings
-from algorithms.aurora_model import PathAutoencoder
-from algorithms.aurora_paths import valid_rows
-from algorithms.aurora_reference import reference_module, train_reference
-from orchestrator.config import STUDY_EVALUATIONS
-from sim import evaluate, random_genomes
+from linkevo.algorithms.aurora import AuroraMapElites, AuroraSettings
+from linkevo.algorithms.aurora_model import PathAutoencoder
+from linkevo.algorithms.aurora_paths import valid_rows
+from linkevo.algorithms.aurora_reference import reference_module, train_reference
+from linkevo.orchestrator.config import STUDY_EVALUATIONS
+from linkevo.sim import evaluate, random_genomes
 
 
 def parse_args() -> argparse.Namespace:

@@ -41,12 +41,12 @@ from mlflow.tracking import MlflowClient
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from orchestrator import config  # noqa: E402
-from orchestrator.driver import trial_specs  # noqa: E402
-from orchestrator.grid import Grid  # noqa: E402
-from orchestrator.local_cluster import ClusterSettings, down, up  # noqa: E402
-from workers.tracking import ensure_experiment  # noqa: E402
-from workers.trial_task import TrialJob, run_trial_job, trial_runs  # noqa: E402
+from linkevo.orchestrator import config  # noqa: E402
+from linkevo.orchestrator.driver import trial_specs  # noqa: E402
+from linkevo.orchestrator.grid import Grid  # noqa: E402
+from linkevo.orchestrator.local_cluster import ClusterSettings, down, up  # noqa: E402
+from linkevo.workers.tracking import ensure_experiment  # noqa: E402
+from linkevo.workers.trial_task import TrialJob, run_trial_job, trial_runs  # noqa: E402
 
 TINY = {
     "approaches": ["EA", "RANDOM"],
@@ -89,8 +89,8 @@ def row_counts(uri: str) -> dict[str, int]:
 def run_grid(cfg: Path, uri: str, db_uri: str, work: Path) -> None:
     """Section 1: the grid through the real driver."""
     grid = Grid.from_config(config.load(cfg))
-    command = [sys.executable, "-m", "orchestrator", "grid", str(cfg), "--tracking-uri", uri,
-               "--no-progress", "--set", f'work_dir="{work / "trials"}"']  # fmt: skip
+    command = [sys.executable, "-m", "linkevo.orchestrator", "grid", str(cfg)]
+    command += ["--tracking-uri", uri, "--no-progress", "--set", f'work_dir="{work / "trials"}"']
     before = row_counts(db_uri) if not uri.startswith("sqlite") else dict.fromkeys(TABLES, 0)
     start = time.perf_counter()
     done = subprocess.run(command, capture_output=True, text=True, cwd=work, check=False)

@@ -29,15 +29,15 @@ import numba
 import numpy as np
 import ray
 
-from orchestrator.driver import trial_specs
-from sim import named_target, random_genomes
-from sim.reference import evaluate_reference
-from workers.evaluators import LocalEvaluator
-from workers.mlflow_recorder import MlflowRecorder
-from workers.ray_evaluator import ActorPoolEvaluator
-from workers.recorders import NullRecorder
-from workers.tracking import ensure_experiment
-from workers.trial import TrialSpec, run_trial
+from linkevo.orchestrator.driver import trial_specs
+from linkevo.sim import named_target, random_genomes
+from linkevo.sim.reference import evaluate_reference
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.mlflow_recorder import MlflowRecorder
+from linkevo.workers.ray_evaluator import ActorPoolEvaluator
+from linkevo.workers.recorders import NullRecorder
+from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.trial import TrialSpec, run_trial
 
 BATCH = 5000
 REPEATS = 40
@@ -190,9 +190,9 @@ def quick_preset(work: Path) -> None:
     """
     from mlflow.tracking import MlflowClient
 
-    from orchestrator import config
-    from orchestrator.grid import Grid
-    from orchestrator.reservation import Cluster, Reservation
+    from linkevo.orchestrator import config
+    from linkevo.orchestrator.grid import Grid
+    from linkevo.orchestrator.reservation import Cluster, Reservation
 
     preset = REPO / "configs" / "quick.toml"
     store = work / "quick-store"

@@ -23,11 +23,11 @@ import statistics
 import time
 from pathlib import Path
 
-from hardware import control_table as ct
-from hardware.config import load_config
-from hardware.emulator import BusEmulator
-from hardware.hexapod import Hexapod
-from hardware.session import run_walk
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.config import load_config
+from linkevo.hardware.emulator import BusEmulator
+from linkevo.hardware.hexapod import Hexapod
+from linkevo.hardware.session import run_walk
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parent.parent
 os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
 sys.path.insert(0, str(REPO))  # for tests.helpers
 
-from orchestrator.report import build_report, load_grid  # noqa: E402
+from linkevo.orchestrator.report import build_report, load_grid  # noqa: E402
 from tests.helpers.report import GridSpec, store_uri, write_grid  # noqa: E402
 
 APPROACHES = ("EA", "NSGA-II", "MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")

@@ -31,10 +31,10 @@ import time
 import numba
 import numpy as np
 
-from sim.evaluate import evaluate
-from sim.evaluation import Evaluation
-from sim.genome import random_genomes
-from sim.reference import evaluate_reference
+from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.genome import random_genomes
+from linkevo.sim.reference import evaluate_reference
 
 
 def main() -> None:

@@ -23,9 +23,9 @@ from pathlib import Path
 
 from mlflow.tracking import MlflowClient
 
-from orchestrator.config import load
-from orchestrator.reservation import Cluster, Reservation
-from workers.tracking import resolve_tracking_uri
+from linkevo.orchestrator.config import load
+from linkevo.orchestrator.reservation import Cluster, Reservation
+from linkevo.workers.tracking import resolve_tracking_uri
 
 ROOT = Path(__file__).resolve().parents[1]
 SEVEN = '["EA","NSGA2","MAP-WH","MAP-LIS","MAP-ST","MAP-AU","RANDOM"]'
@@ -42,7 +42,13 @@ def parse_args() -> argparse.Namespace:
 
 def run_grid(args: argparse.Namespace, store: Path) -> str:
     """Runs the study grid into `store` through the CLI; returns its grid id."""
-    command = [sys.executable, "-m", "orchestrator", "grid", str(ROOT / "configs/paper.toml")]
+    command = [
+        sys.executable,
+        "-m",
+        "linkevo.orchestrator",
+        "grid",
+        str(ROOT / "configs/paper.toml"),
+    ]
     command += ["--no-progress", "--tracking-uri", str(store), "--set", f"mode={args.mode}"]
     if args.random:
         command += ["--set", f"approaches={SEVEN}"]

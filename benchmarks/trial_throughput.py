@@ -29,13 +29,13 @@ from pathlib import Path
 import numpy as np
 from deap import base, creator, tools
 
-from algorithms import GridArchive, Individuals, select_nsga2
-from orchestrator.config import STUDY_EVALUATIONS
-from sim import DESCRIPTOR_SPACES, evaluate, random_genomes
-from sim.reference import evaluate_reference
-from workers.evaluators import LocalEvaluator
-from workers.recorders import NullRecorder
-from workers.trial import TrialSpec, run_trial
+from linkevo.algorithms import GridArchive, Individuals, select_nsga2
+from linkevo.orchestrator.config import STUDY_EVALUATIONS
+from linkevo.sim import DESCRIPTOR_SPACES, evaluate, random_genomes
+from linkevo.sim.reference import evaluate_reference
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.recorders import NullRecorder
+from linkevo.workers.trial import TrialSpec, run_trial
 
 BATCH = 5000
 SMALL_BATCH = 1000

@@ -1,10 +1,10 @@
 """linkevo's hardware layer: the MX-28 hexapod's driver, gait, safety, emulator, field trials."""
 
-from hardware.bus import DxlBus
-from hardware.config import RobotConfig, load_config
-from hardware.emulator import BusEmulator
-from hardware.hexapod import Hexapod, WalkResult
-from hardware.session import run_walk
+from linkevo.hardware.bus import DxlBus
+from linkevo.hardware.config import RobotConfig, load_config
+from linkevo.hardware.emulator import BusEmulator
+from linkevo.hardware.hexapod import Hexapod, WalkResult
+from linkevo.hardware.session import run_walk
 
 __all__ = [
     "BusEmulator",

@@ -11,8 +11,8 @@ from typing import TypeVar
 import serial
 from dynamixel_sdk import COMM_RX_TIMEOUT, COMM_SUCCESS, GroupSyncWrite, PacketHandler, PortHandler
 
-from hardware import control_table as ct
-from hardware.errors import (
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.errors import (
     ALERT_BIT,
     CommError,
     DeviceError,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from hardware import control_table as ct
+from linkevo.hardware import control_table as ct
 
 _TABLE_SIZE = 147
 _DEFAULTS = {

@@ -19,9 +19,9 @@ import tty
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
-from hardware import control_table as ct
-from hardware import protocol as p
-from hardware.emulated_motor import EmulatedMotor, MotorSnapshot
+from linkevo.hardware import control_table as ct
+from linkevo.hardware import protocol as p
+from linkevo.hardware.emulated_motor import EmulatedMotor, MotorSnapshot
 
 INSTRUCTION_ERROR = 2
 _LOG_LIMIT = 200_000

@@ -11,19 +11,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hardware import control_table as ct
-from hardware.bus import DxlBus, Status
-from hardware.config import RobotConfig
-from hardware.errors import (
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.bus import DxlBus, Status
+from linkevo.hardware.config import RobotConfig
+from linkevo.hardware.errors import (
     AlignmentError,
     CommError,
     HardwareError,
     MotorNotResponding,
     WrongModel,
 )
-from hardware.gait import PhaseController, alignment_goals
-from hardware.safety import REBOOT, SafetyMonitor
-from hardware.telemetry import TickRecord
+from linkevo.hardware.gait import PhaseController, alignment_goals
+from linkevo.hardware.safety import REBOOT, SafetyMonitor
+from linkevo.hardware.telemetry import TickRecord
 
 _log = logging.getLogger(__name__)
 _ALIGN_POLL_S = 0.02

@@ -14,10 +14,10 @@ import signal
 import threading
 from collections.abc import Mapping
 
-from hardware import control_table as ct
-from hardware.bus import Status
-from hardware.config import MotorConfig, SafetyConfig
-from hardware.errors import SafetyStop
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.bus import Status
+from linkevo.hardware.config import MotorConfig, SafetyConfig
+from linkevo.hardware.errors import SafetyStop
 
 REBOOT = "reboot"
 

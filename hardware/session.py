@@ -6,12 +6,12 @@ import contextlib
 from collections.abc import Callable
 from pathlib import Path
 
-from hardware.config import RobotConfig
-from hardware.emulator import BusEmulator
-from hardware.errors import ShutdownIncomplete, StopRequested
-from hardware.hexapod import Hexapod, WalkResult
-from hardware.safety import SignalGuard
-from hardware.telemetry import TelemetryWriter, TickRecord
+from linkevo.hardware.config import RobotConfig
+from linkevo.hardware.emulator import BusEmulator
+from linkevo.hardware.errors import ShutdownIncomplete, StopRequested
+from linkevo.hardware.hexapod import Hexapod, WalkResult
+from linkevo.hardware.safety import SignalGuard
+from linkevo.hardware.telemetry import TelemetryWriter, TickRecord
 
 
 def run_walk(

@@ -8,9 +8,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from hardware import control_table as ct
-from hardware.bus import Status
-from workers.artifacts import atomic_path
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.bus import Status
+from linkevo.workers.artifacts import atomic_path
 
 
 @dataclass(frozen=True)

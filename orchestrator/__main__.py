@@ -1,7 +1,7 @@
-"""Runs the `linkevo` CLI as `python -m orchestrator`."""
+"""Runs the `linkevo` CLI as `python -m linkevo.orchestrator`."""
 
 import sys
 
-from orchestrator.cli import main
+from linkevo.orchestrator.cli import main
 
 sys.exit(main())

@@ -11,14 +11,14 @@ import sys
 # `func(args) -> int`. Modules are imported only when the CLI starts, so one slow or
 # heavy import (Ray, torch) is paid only by the commands that need it at run time.
 COMMAND_MODULES = (
-    "orchestrator.commands.sim",
-    "orchestrator.commands.trial",
-    "orchestrator.commands.grid",
-    "orchestrator.commands.report",
-    "orchestrator.commands.pull",
-    "orchestrator.commands.explore",
-    "orchestrator.commands.cluster",
-    "orchestrator.commands.hexapod",
+    "linkevo.orchestrator.commands.sim",
+    "linkevo.orchestrator.commands.trial",
+    "linkevo.orchestrator.commands.grid",
+    "linkevo.orchestrator.commands.report",
+    "linkevo.orchestrator.commands.pull",
+    "linkevo.orchestrator.commands.explore",
+    "linkevo.orchestrator.commands.cluster",
+    "linkevo.orchestrator.commands.hexapod",
 )
 
 
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     """Runs the CLI and returns the process exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    from workers.tracking import TrackingUriError
+    from linkevo.workers.tracking import TrackingUriError
 
     try:
         return int(args.func(args) or 0)

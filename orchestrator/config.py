@@ -8,10 +8,10 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from algorithms.factory import APPROACHES, STUDY_APPROACHES
-from algorithms.scoring import SINGLE_FITNESSES
-from orchestrator.cli import CliError
-from sim.evaluation import MODES
+from linkevo.algorithms.factory import APPROACHES, STUDY_APPROACHES
+from linkevo.algorithms.scoring import SINGLE_FITNESSES
+from linkevo.orchestrator.cli import CliError
+from linkevo.sim.evaluation import MODES
 
 STUDY_EVALUATIONS = 726_750
 """Evaluations per trial in the study (one hour on 16 CPUs, spec §6); whole batches of

@@ -22,12 +22,12 @@ from typing import TextIO
 from mlflow.entities import Metric, Param
 from mlflow.tracking import MlflowClient
 
-from orchestrator.config import ConfigError, GridConfig, flatten, to_toml
-from orchestrator.grid import Grid, TrialCell
-from orchestrator.reservation import Cluster, Reservation
-from workers.tracking import ensure_experiment, resolve_tracking_uri
-from workers.trial import TrialSpec
-from workers.trial_task import TrialJob, TrialOutcome, end_run, outcome_of, trial_runs
+from linkevo.orchestrator.config import ConfigError, GridConfig, flatten, to_toml
+from linkevo.orchestrator.grid import Grid, TrialCell
+from linkevo.orchestrator.reservation import Cluster, Reservation
+from linkevo.workers.tracking import ensure_experiment, resolve_tracking_uri
+from linkevo.workers.trial import TrialSpec
+from linkevo.workers.trial_task import TrialJob, TrialOutcome, end_run, outcome_of, trial_runs
 
 LOCAL_OBJECT_STORE_BYTES = 512 * 1024**2
 """Object store of a Ray instance the driver starts itself: the trial objects are small."""
@@ -176,7 +176,7 @@ def warm_kernels() -> None:
     compiling it at the same time."""
     import numpy as np
 
-    from sim import evaluate, random_genomes
+    from linkevo.sim import evaluate, random_genomes
 
     evaluate(random_genomes(np.random.default_rng(0), 2))
 
@@ -234,7 +234,7 @@ def _connect_ray(address: str | None, cluster: Cluster) -> bool:
 def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
     """Returns every trial's spec by key, checking each approach's options by building
     its optimizer once; raises ConfigError before any trial starts."""
-    from workers.trial import build_optimizer
+    from linkevo.workers.trial import build_optimizer
 
     cfg = grid.config
     specs: dict[str, TrialSpec] = {}
@@ -409,7 +409,7 @@ def _fan_out(
     """
     import ray
 
-    from workers.trial_task import run_trial_job
+    from linkevo.workers.trial_task import run_trial_job
 
     task = ray.remote(run_trial_job)
     pending = deque(cells)
@@ -455,7 +455,7 @@ def _run_tasks(
     from ray.util.placement_group import placement_group, remove_placement_group
     from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
-    from workers.trial_task import RETRYABLE_ERRORS
+    from linkevo.workers.trial_task import RETRYABLE_ERRORS
 
     cfg = grid.config
     reservation = ctx.reservation

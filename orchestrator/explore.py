@@ -29,15 +29,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from algorithms.factory import REPERTOIRE_APPROACHES
-from orchestrator.pull import own_modules
-from orchestrator.report.load import in_study_order, latest_per_trial, search_trial_runs
-from sim import decode, simulate
-from sim.decode import BEAM_KINDS, NODE_KINDS
-from sim.descriptors import DESCRIPTOR_SPACES
-from sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
-from sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
-from workers.artifacts import write_bytes_atomic
+from linkevo.algorithms.factory import REPERTOIRE_APPROACHES
+from linkevo.orchestrator.pull import own_modules
+from linkevo.orchestrator.report.load import in_study_order, latest_per_trial, search_trial_runs
+from linkevo.sim import decode, simulate
+from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES
+from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
+from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from linkevo.workers.artifacts import write_bytes_atomic
 
 PAGE_ARTIFACT = "explorer.html"
 """The page's name among a run's artefacts (a trial's run, or a grid's parent run)."""
@@ -158,7 +158,9 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
 
 def render_page(title: str, views: list[dict]) -> str:
     """Returns the explorer page over one or more repertoire views (`repertoire_view`)."""
-    template = resources.files("orchestrator").joinpath(TEMPLATE).read_text(encoding="utf-8")
+    template = (
+        resources.files("linkevo.orchestrator").joinpath(TEMPLATE).read_text(encoding="utf-8")
+    )
     blobs, index = [], []
     for i, view in enumerate(views):
         packed = gzip.compress(json.dumps(view, separators=(",", ":"), allow_nan=False).encode())
@@ -255,7 +257,7 @@ def explore(
         log_to: a run id to log the page to as `explorer.html` (None: do not log).
         progress: called with (trials done, trial) after each trial is read.
     """
-    from workers.linkages import repertoire
+    from linkevo.workers.linkages import repertoire
 
     views = []
     with tempfile.TemporaryDirectory(prefix="linkevo-explore-") as tmp:

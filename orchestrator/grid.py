@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.config import GridConfig
+from linkevo.orchestrator.config import GridConfig
 
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 CODE_VERSION_ENV = "LINKEVO_CODE_VERSION"

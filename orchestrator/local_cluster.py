@@ -33,7 +33,7 @@ import urllib.request
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from workers.artifacts import write_json_atomic, write_text_atomic
+from linkevo.workers.artifacts import write_json_atomic, write_text_atomic
 
 STATE_FILE = "cluster.json"
 TOKEN_FILE = "ray_auth_token"

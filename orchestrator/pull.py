@@ -9,12 +9,12 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.linkage_doc import from_document, json_floats, to_document
-from sim.physical import TOGGLE_DEG
-from workers.artifacts import write_json_atomic, write_text_atomic
-from workers.build_drawings import draw_layers, draw_path_overlay, draw_template
-from workers.drawing import draw_linkage
-from workers.linkages import SourceLinkage
+from linkevo.sim.linkage_doc import from_document, json_floats, to_document
+from linkevo.sim.physical import TOGGLE_DEG
+from linkevo.workers.artifacts import write_json_atomic, write_text_atomic
+from linkevo.workers.build_drawings import draw_layers, draw_path_overlay, draw_template
+from linkevo.workers.drawing import draw_linkage
+from linkevo.workers.linkages import SourceLinkage
 
 SHEET_COLUMNS = (
     "beam",
@@ -165,8 +165,8 @@ def lego_line(lego: dict) -> str:
 
 def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     """Returns the LEGO build of a linkage as JSON-able values, or why there is none."""
-    from sim.layers import layer_plan
-    from sim.lego import QuantiseError, quantise
+    from linkevo.sim.layers import layer_plan
+    from linkevo.sim.lego import QuantiseError, quantise
 
     fitness = fitness if fitness in ("Fp", "Fsl") else "Fp"
     try:

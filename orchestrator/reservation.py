@@ -6,7 +6,7 @@ import math
 import os
 from dataclasses import dataclass, replace
 
-from orchestrator.config import ConfigError, GridConfig
+from linkevo.orchestrator.config import ConfigError, GridConfig
 
 
 @dataclass(frozen=True)

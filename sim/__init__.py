@@ -3,13 +3,13 @@
 Pure numerics (numpy and numba): no Ray, MLflow, torch or file I/O.
 """
 
-from sim.decode import LinkageBatch, decode
-from sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace, bin_descriptors
-from sim.evaluate import evaluate
-from sim.evaluation import FITNESSES, MODES, Evaluation
-from sim.fitness import Target, named_target
-from sim.genome import N_GENES, GenomeError, random_genomes, validate_genomes
-from sim.kinematics import Motion, simulate
+from linkevo.sim.decode import LinkageBatch, decode
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace, bin_descriptors
+from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluation import FITNESSES, MODES, Evaluation
+from linkevo.sim.fitness import Target, named_target
+from linkevo.sim.genome import N_GENES, GenomeError, random_genomes, validate_genomes
+from linkevo.sim.kinematics import Motion, simulate
 
 __all__ = [
     "DESCRIPTOR_SPACES",

@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim import kernels
-from sim.evaluation import MODES
-from sim.genome import MAX_BEAMS, N_NODES, validate_genomes
+from linkevo.sim import kernels
+from linkevo.sim.evaluation import MODES
+from linkevo.sim.genome import MAX_BEAMS, N_NODES, validate_genomes
 
 NODE_KINDS = ("motor", "static", "crank", "triangle", "extension")
 BEAM_KINDS = ("crank", "triangle", "extension")

@@ -7,12 +7,12 @@ import itertools
 import numba
 import numpy as np
 
-from sim import kernels
-from sim.decode import check_mode
-from sim.evaluation import Evaluation, field_shapes
-from sim.fitness import FITNESS_CODES, N_OBJECTIVES, Target, check_fitness, named_target
-from sim.genome import validate_genomes
-from sim.kinematics import DEFAULT_ANGLES, check_angles
+from linkevo.sim import kernels
+from linkevo.sim.decode import check_mode
+from linkevo.sim.evaluation import Evaluation, field_shapes
+from linkevo.sim.fitness import FITNESS_CODES, N_OBJECTIVES, Target, check_fitness, named_target
+from linkevo.sim.genome import validate_genomes
+from linkevo.sim.kinematics import DEFAULT_ANGLES, check_angles
 
 
 def evaluate(

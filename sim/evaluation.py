@@ -8,7 +8,7 @@ from typing import Literal
 
 import numpy as np
 
-from sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
+from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
 
 Mode = Literal["paper", "legacy"]
 MODES: tuple[str, ...] = ("paper", "legacy")

@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.evaluation import FITNESSES
-from sim.kernels import FP, FP2, FSL, FSL2
+from linkevo.sim.evaluation import FITNESSES
+from linkevo.sim.kernels import FP, FP2, FSL, FSL2
 
 FITNESS_CODES: dict[str, int] = {"Fp": FP, "Fsl": FSL, "Fp2": FP2, "Fsl2": FSL2}
 """Kernel code of each fitness name."""

@@ -15,7 +15,7 @@ import math
 import numba
 import numpy as np
 
-from sim.genome import BLOCK_SIZE, CRANK_GENE, FIRST_BLOCK, MAX_BEAMS, N_NODES
+from linkevo.sim.genome import BLOCK_SIZE, CRANK_GENE, FIRST_BLOCK, MAX_BEAMS, N_NODES
 
 TOL = 0.1
 """The tolerance of circle_intersection (spec §2), as published."""

@@ -6,9 +6,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim import kernels
-from sim.decode import LinkageBatch
-from sim.genome import MAX_BEAMS, N_NODES
+from linkevo.sim import kernels
+from linkevo.sim.decode import LinkageBatch
+from linkevo.sim.genome import MAX_BEAMS, N_NODES
 
 DEFAULT_ANGLES = 40
 

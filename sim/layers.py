@@ -19,8 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from sim.decode import LinkageBatch
-from sim.kinematics import Motion
+from linkevo.sim.decode import LinkageBatch
+from linkevo.sim.kinematics import Motion
 
 COLLINEAR = 1e-9
 """A cross product (square modules) below this is taken as zero: the points are collinear."""

@@ -19,11 +19,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim import reference
-from sim.decode import NODE_KINDS, LinkageBatch, decode
-from sim.fitness import named_target
-from sim.kinematics import DEFAULT_ANGLES, Motion, simulate
-from sim.physical import PhysicalChecks, max_stretch, physical_checks
+from linkevo.sim import reference
+from linkevo.sim.decode import NODE_KINDS, LinkageBatch, decode
+from linkevo.sim.fitness import named_target
+from linkevo.sim.kinematics import DEFAULT_ANGLES, Motion, simulate
+from linkevo.sim.physical import PhysicalChecks, max_stretch, physical_checks
 
 EXACT = 1e-9
 """Largest beam stretch (modules) of a rounding that counts as exact kinematics."""

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim import kernels
-from sim.decode import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
-from sim.genome import MAX_BEAMS, N_GENES, N_NODES, validate_genomes
-from sim.kinematics import DEFAULT_ANGLES, Motion, check_angles, simulate
-from sim.physical import physical_checks
+from linkevo.sim import kernels
+from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
+from linkevo.sim.genome import MAX_BEAMS, N_GENES, N_NODES, validate_genomes
+from linkevo.sim.kinematics import DEFAULT_ANGLES, Motion, check_angles, simulate
+from linkevo.sim.physical import physical_checks
 
 FORMAT = "linkevo.linkage/2"
 """Version 2 adds each node's and beam's topology, so a document rebuilds without its genome."""

@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.decode import NODE_KINDS, LinkageBatch
-from sim.kinematics import Motion
+from linkevo.sim.decode import NODE_KINDS, LinkageBatch
+from linkevo.sim.kinematics import Motion
 
 TOGGLE_DEG = 5.0
 """A transmission angle below this is a toggle position."""

@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.evaluation import FITNESSES, MODES, Evaluation
-from sim.fitness import Target, named_target
-from sim.genome import (
+from linkevo.sim.evaluation import FITNESSES, MODES, Evaluation
+from linkevo.sim.fitness import Target, named_target
+from linkevo.sim.genome import (
     BLOCK_SIZE,
     CRANK_GENE,
     FIRST_BLOCK,

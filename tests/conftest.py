@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from workers.evaluators import Evaluator
+from linkevo.workers.evaluators import Evaluator
 
 
 class CrashingEvaluator:

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.decode import decode
-from sim.genome import validate_genomes
-from sim.kinematics import DEFAULT_ANGLES, simulate
-from workers.artifacts import atomic_path
+from linkevo.sim.decode import decode
+from linkevo.sim.genome import validate_genomes
+from linkevo.sim.kinematics import DEFAULT_ANGLES, simulate
+from linkevo.workers.artifacts import atomic_path
 
 SUFFIXES = (".png", ".gif")
 LABEL_BOX = {"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none"}

@@ -9,10 +9,10 @@ from typing import Protocol
 
 import numpy as np
 
-from sim.evaluate import evaluate
-from sim.evaluation import Evaluation
-from sim.fitness import N_OBJECTIVES, NAMED_TARGETS, Target, named_target
-from workers.result_pool import MemoryBuffer, ResultPool
+from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.fitness import N_OBJECTIVES, NAMED_TARGETS, Target, named_target
+from linkevo.workers.result_pool import MemoryBuffer, ResultPool
 
 Pending = Callable[[], Evaluation]
 """A submitted batch: calling it waits for and returns its Evaluation."""

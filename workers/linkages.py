@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from sim.linkage_doc import to_document
+from linkevo.sim.linkage_doc import to_document
 
 if TYPE_CHECKING:
     from mlflow.tracking import MlflowClient
@@ -148,8 +148,8 @@ def list_cells(client: MlflowClient, run_id: str, top: int, mode: str, buildable
     """
     import pandas as pd
 
-    from sim import decode, simulate
-    from sim.physical import physical_checks
+    from linkevo.sim import decode, simulate
+    from linkevo.sim.physical import physical_checks
 
     with tempfile.TemporaryDirectory() as tmp:
         table = repertoire(client, run_id, Path(tmp))

@@ -18,13 +18,13 @@ import ray
 from ray.util.placement_group import PlacementGroup
 from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
-from sim.evaluation import Evaluation
-from sim.fitness import N_OBJECTIVES
-from sim.genome import validate_genomes
-from workers import channel
-from workers.evaluators import LocalEvaluator, Pending
-from workers.result_pool import KEEP, ResultPool
-from workers.shared_batch import SharedBatch, SharedLayout, shared_memory_available
+from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.fitness import N_OBJECTIVES
+from linkevo.sim.genome import validate_genomes
+from linkevo.workers import channel
+from linkevo.workers.evaluators import LocalEvaluator, Pending
+from linkevo.workers.result_pool import KEEP, ResultPool
+from linkevo.workers.shared_batch import SharedBatch, SharedLayout, shared_memory_available
 
 
 class EvaluatorWorker:

@@ -14,10 +14,10 @@ from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
-from algorithms.factory import MAP_ELITES
-from algorithms.pareto import non_dominated_ranks
-from sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
-from workers.artifacts import atomic_path
+from linkevo.algorithms.factory import MAP_ELITES
+from linkevo.algorithms.pareto import non_dominated_ranks
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.workers.artifacts import atomic_path
 
 DOWNSAMPLED = 5
 """Side of the downsampled path maps (5 × 5 cells, as in the study)."""

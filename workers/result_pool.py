@@ -14,7 +14,7 @@ from typing import Protocol
 
 import numpy as np
 
-from sim.evaluation import Evaluation
+from linkevo.sim.evaluation import Evaluation
 
 KEEP = 4
 """Buffers a pool keeps; older ones are released (arrays still held stay valid)."""

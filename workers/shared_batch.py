@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.evaluation import ALIGNMENT, Evaluation
-from sim.genome import N_GENES
-from workers.result_pool import Root
+from linkevo.sim.evaluation import ALIGNMENT, Evaluation
+from linkevo.sim.genome import N_GENES
+from linkevo.workers.result_pool import Root
 
 SHARED_DIR = Path("/dev/shm")
 """Where batch files live: a memory-backed file system (Linux)."""

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from algorithms import (
+from linkevo.algorithms import (
     APPROACHES,
     REPERTOIRE_APPROACHES,
     SINGLE_FITNESSES,
@@ -20,14 +20,14 @@ from algorithms import (
     eval_fitness,
     make_optimizer,
 )
-from sim.evaluation import MODES
-from sim.linkage_doc import to_document
-from workers.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
-from workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
-from workers.drawing import draw_linkage
-from workers.evaluators import Evaluator, resolve_target
-from workers.recorders import MetricsCsv, Recorder
-from workers.repertoire_plots import draw_trial_maps
+from linkevo.sim.evaluation import MODES
+from linkevo.sim.linkage_doc import to_document
+from linkevo.workers.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
+from linkevo.workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from linkevo.workers.drawing import draw_linkage
+from linkevo.workers.evaluators import Evaluator, resolve_target
+from linkevo.workers.recorders import MetricsCsv, Recorder
+from linkevo.workers.repertoire_plots import draw_trial_maps
 
 CHECKPOINT_DIR = "checkpoint"
 METRICS_FILE = "metrics.csv"

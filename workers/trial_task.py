@@ -15,10 +15,10 @@ import ray
 from mlflow.entities import Param, Run
 from mlflow.tracking import MlflowClient
 
-from workers.evaluators import LocalEvaluator
-from workers.mlflow_recorder import MlflowRecorder
-from workers.ray_evaluator import ActorPoolEvaluator
-from workers.trial import TrialSpec, run_trial
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.mlflow_recorder import MlflowRecorder
+from linkevo.workers.ray_evaluator import ActorPoolEvaluator
+from linkevo.workers.trial import TrialSpec, run_trial
 
 ERROR_TAG_CHARS = 500
 """How much of a failure message the `error` tag keeps."""

@@ -7,7 +7,7 @@ import argparse
 import shlex
 from pathlib import Path
 
-from orchestrator.cli import CliError
+from linkevo.orchestrator.cli import CliError
 
 DEFAULT_DIR = Path("runs/cluster")
 
@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def handler(args: argparse.Namespace) -> int:
     """Runs `linkevo cluster ACTION`."""
-    from orchestrator import local_cluster as lc
+    from linkevo.orchestrator import local_cluster as lc
 
     try:
         if args.action == "up":

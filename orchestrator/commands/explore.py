@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from orchestrator.cli import CliError
+from linkevo.orchestrator.cli import CliError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,8 +53,8 @@ def handle(args: argparse.Namespace) -> int:
 
     from mlflow.tracking import MlflowClient
 
-    from orchestrator.commands.report import GRID_ID
-    from orchestrator.explore import (
+    from linkevo.orchestrator.commands.report import GRID_ID
+    from linkevo.orchestrator.explore import (
         GRID_DRAWN,
         PAGE_ARTIFACT,
         ExploreError,
@@ -62,8 +62,8 @@ def handle(args: argparse.Namespace) -> int:
         grid_trials,
         trial_run,
     )
-    from orchestrator.report.load import GridNotFoundError, find_grid_run
-    from workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.orchestrator.report.load import GridNotFoundError, find_grid_run
+    from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
     if not GRID_ID.fullmatch(args.ref):  # it goes into an MLflow filter string
         raise CliError(

@@ -9,7 +9,7 @@ import signal
 import subprocess
 import sys
 
-from orchestrator.cli import CliError
+from linkevo.orchestrator.cli import CliError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -79,8 +79,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_grid(args: argparse.Namespace) -> int:
     """Runs (or with --dry-run describes) a grid; exit 1 when any trial failed."""
-    from orchestrator import config as grid_config
-    from orchestrator.grid import Grid
+    from linkevo.orchestrator import config as grid_config
+    from linkevo.orchestrator.grid import Grid
 
     overrides = list(args.overrides)
     if args.tracking_uri is not None:
@@ -88,7 +88,7 @@ def run_grid(args: argparse.Namespace) -> int:
     if args.max_concurrent_trials is not None:
         overrides.append(f"max_concurrent_trials={args.max_concurrent_trials}")
     grid = Grid.from_config(grid_config.load(args.config, overrides))
-    from orchestrator import driver
+    from linkevo.orchestrator import driver
 
     if args.dry_run:
         driver.trial_specs(grid)  # refuses what the launch would refuse
@@ -130,14 +130,14 @@ def _resume_command(args: argparse.Namespace) -> str:
 
 
 def _ui_flag(uri: str) -> str:
-    from workers.tracking import default_tracking_uri
+    from linkevo.workers.tracking import default_tracking_uri
 
     return "" if uri == default_tracking_uri() else f" --tracking-uri '{uri}'"
 
 
 def run_ui(args: argparse.Namespace) -> int:
     """Runs `mlflow ui` on the store, bound to 127.0.0.1, until interrupted."""
-    from workers.tracking import artifact_root_for, require_store, resolve_tracking_uri
+    from linkevo.workers.tracking import artifact_root_for, require_store, resolve_tracking_uri
 
     uri = resolve_tracking_uri(args.tracking_uri)
     if uri.startswith(("http://", "https://")):

@@ -7,7 +7,7 @@ import re
 import sys
 from pathlib import Path
 
-from orchestrator.cli import CliError
+from linkevo.orchestrator.cli import CliError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -109,9 +109,9 @@ def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo pull`."""
     from mlflow.tracking import MlflowClient
 
-    from orchestrator.pull import pull
-    from workers.linkages import LinkageError, LinkageRef, load_source
-    from workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.orchestrator.pull import pull
+    from linkevo.workers.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
     client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
     text = args.ref
@@ -141,7 +141,7 @@ def handle(args: argparse.Namespace) -> int:
 
 def _print_cells(client, ref, top: int, buildable: bool) -> int:
     """Prints a run's best repertoire cells with their checks (`linkevo pull RUN --list`)."""
-    from workers.linkages import list_cells
+    from linkevo.workers.linkages import list_cells
 
     if top < 1:
         raise CliError(f"--list {top}: give the number of cells to list, >= 1")

@@ -6,7 +6,7 @@ import argparse
 import re
 from pathlib import Path
 
-from orchestrator.cli import CliError
+from linkevo.orchestrator.cli import CliError
 
 GRID_ID = re.compile(r"[A-Za-z0-9_.-]+")
 """What a grid id may hold (it goes into an MLflow filter string)."""
@@ -65,8 +65,8 @@ def _store_options(parser: argparse.ArgumentParser) -> None:
 
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
-    from orchestrator.report import GridNotFoundError, build_report
-    from workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.orchestrator.report import GridNotFoundError, build_report
+    from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
     if args.grid_id is not None and not GRID_ID.fullmatch(args.grid_id):
         raise CliError(
@@ -96,10 +96,10 @@ def handler(args: argparse.Namespace) -> int:
 
 def compare_handler(args: argparse.Namespace) -> int:
     """Prints the two grids' comparison table (and writes it as CSV with --out)."""
-    from orchestrator.report import GridNotFoundError
-    from orchestrator.report.compare import compare_grids
-    from workers.artifacts import write_text_atomic
-    from workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.orchestrator.report import GridNotFoundError
+    from linkevo.orchestrator.report.compare import compare_grids
+    from linkevo.workers.artifacts import write_text_atomic
+    from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
     for grid in (args.grid_a, args.grid_b):
         if not GRID_ID.fullmatch(grid):

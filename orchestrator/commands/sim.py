@@ -8,10 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.cli import CliError
-from sim.evaluation import FITNESSES, MODES
-from sim.genome import GenomeError, validate_genomes
-from workers.drawing import SUFFIXES
+from linkevo.orchestrator.cli import CliError
+from linkevo.sim.evaluation import FITNESSES, MODES
+from linkevo.sim.genome import GenomeError, validate_genomes
+from linkevo.workers.drawing import SUFFIXES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -75,9 +75,9 @@ def check_angles(angles: int) -> None:
 
 def run_eval(args: argparse.Namespace) -> int:
     """Handles `linkevo eval`."""
-    from sim.evaluate import evaluate
-    from workers.artifacts import write_npz_atomic
-    from workers.evaluators import resolve_target
+    from linkevo.sim.evaluate import evaluate
+    from linkevo.workers.artifacts import write_npz_atomic
+    from linkevo.workers.evaluators import resolve_target
 
     genomes = load_genomes(args.genomes)
     check_writable(args.out, (".npz",))
@@ -108,8 +108,8 @@ def run_eval(args: argparse.Namespace) -> int:
 
 def run_show(args: argparse.Namespace) -> int:
     """Handles `linkevo show`."""
-    from sim.linkage_doc import from_document
-    from workers.drawing import draw_linkage
+    from linkevo.sim.linkage_doc import from_document
+    from linkevo.workers.drawing import draw_linkage
 
     check_writable(args.out, SUFFIXES)
     check_angles(args.angles)

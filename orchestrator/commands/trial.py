@@ -8,13 +8,13 @@ import os
 import tempfile
 from pathlib import Path
 
-from algorithms import APPROACHES, SINGLE_FITNESSES
-from orchestrator.cli import CliError
-from sim.evaluation import MODES
-from workers.checkpoint import CheckpointError
-from workers.evaluators import LocalEvaluator
-from workers.recorders import ProgressRecorder
-from workers.trial import (
+from linkevo.algorithms import APPROACHES, SINGLE_FITNESSES
+from linkevo.orchestrator.cli import CliError
+from linkevo.sim.evaluation import MODES
+from linkevo.workers.checkpoint import CheckpointError
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.recorders import ProgressRecorder
+from linkevo.workers.trial import (
     CHECKPOINT_DIR,
     METRICS_FILE,
     TrialSpec,

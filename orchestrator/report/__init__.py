@@ -1,6 +1,6 @@
 """Reports: a grid's comparison figures, statistics and findings, read from MLflow."""
 
-from orchestrator.report.build import ReportResult, build_report
-from orchestrator.report.load import GridData, GridNotFoundError, load_grid
+from linkevo.orchestrator.report.build import ReportResult, build_report
+from linkevo.orchestrator.report.load import GridData, GridNotFoundError, load_grid
 
 __all__ = ["GridData", "GridNotFoundError", "ReportResult", "build_report", "load_grid"]

@@ -10,14 +10,14 @@ from pathlib import Path
 
 import pandas as pd
 
-from orchestrator.config import ConfigError, from_dict, to_toml
-from orchestrator.report import figures as fig
-from orchestrator.report.checks import best_linkage_checks, checks_summary
-from orchestrator.report.findings import Finding, check_findings
-from orchestrator.report.html import render_html
-from orchestrator.report.load import GridData, load_grid
-from orchestrator.report.stats import pairwise_tests, summary_table
-from workers.artifacts import write_bytes_atomic
+from linkevo.orchestrator.config import ConfigError, from_dict, to_toml
+from linkevo.orchestrator.report import figures as fig
+from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
+from linkevo.orchestrator.report.findings import Finding, check_findings
+from linkevo.orchestrator.report.html import render_html
+from linkevo.orchestrator.report.load import GridData, load_grid
+from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
+from linkevo.workers.artifacts import write_bytes_atomic
 
 REPORT_ARTIFACT_DIR = "report"
 """Where the report lands among the grid parent run's artefacts."""

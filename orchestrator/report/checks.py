@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from orchestrator.report.load import GridData, in_study_order
-from sim import decode, simulate
-from sim.linkage_doc import from_document
-from sim.physical import physical_checks
+from linkevo.orchestrator.report.load import GridData, in_study_order
+from linkevo.sim import decode, simulate
+from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.physical import physical_checks
 
 TRIAL_CHECK_COLUMNS: tuple[str, ...] = (
     "trial_key",

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, load_grid, ordered
-from orchestrator.report.stats import ALPHA, a12, holm, mann_whitney
+from linkevo.orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, load_grid, ordered
+from linkevo.orchestrator.report.stats import ALPHA, a12, holm, mann_whitney
 
 COLUMNS: tuple[str, ...] = (
     "fitness", "approach", "n_a", "median_a", "n_b", "median_b", "difference",

@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
 
-from orchestrator.report.load import GridData, read_archive, read_archives
-from sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
-from workers.repertoire_plots import (
+from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.workers.repertoire_plots import (
     DOWNSAMPLED,
     LOSS_CMAP,
     STRIP_PATHS,

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from orchestrator.report.figures import label
-from orchestrator.report.load import BASELINE, GridData
-from orchestrator.report.stats import ALPHA
-from workers.repertoire_plots import is_map_elites, is_pareto
+from linkevo.orchestrator.report.figures import label
+from linkevo.orchestrator.report.load import BASELINE, GridData
+from linkevo.orchestrator.report.stats import ALPHA
+from linkevo.workers.repertoire_plots import is_map_elites, is_pareto
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"

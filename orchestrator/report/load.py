@@ -14,7 +14,7 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 import pandas as pd
 
-from workers.trial import BEST_JSON
+from linkevo.workers.trial import BEST_JSON
 
 APPROACH_ORDER: tuple[str, ...] = (
     "EA",

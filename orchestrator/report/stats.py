@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import mannwhitneyu
 
-from orchestrator.report.load import APPROACH_ORDER, BASELINE, FITNESS_ORDER, ordered
+from linkevo.orchestrator.report.load import APPROACH_ORDER, BASELINE, FITNESS_ORDER, ordered
 
 ALPHA = 0.05
 """Family-wise significance level of the Holm-corrected tests (per fitness)."""

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 import torch
 
-from algorithms.aurora import AuroraMapElites, AuroraSettings
-from algorithms.aurora_model import PathAutoencoder
-from algorithms.aurora_paths import prepare_paths
-from algorithms.factory import make_optimizer
-from sim import evaluate
-from sim.evaluation import Evaluation
+from linkevo.algorithms.aurora import AuroraMapElites, AuroraSettings
+from linkevo.algorithms.aurora_model import PathAutoencoder
+from linkevo.algorithms.aurora_paths import prepare_paths
+from linkevo.algorithms.factory import make_optimizer
+from linkevo.sim import evaluate
+from linkevo.sim.evaluation import Evaluation
 
 SMALL = {
     "initial_epochs": 4,

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import torch
 
-from algorithms.aurora_model import PathAutoencoder
-from algorithms.aurora_paths import prepare_paths, valid_rows
-from algorithms.aurora_reference import reference_module, train_reference
+from linkevo.algorithms.aurora_model import PathAutoencoder
+from linkevo.algorithms.aurora_paths import prepare_paths, valid_rows
+from linkevo.algorithms.aurora_reference import reference_module, train_reference
 
 N_ANGLES = 40
 

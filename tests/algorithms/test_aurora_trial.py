@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from workers.evaluators import LocalEvaluator
-from workers.recorders import NullRecorder
-from workers.trial import TrialSpec, run_trial
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.recorders import NullRecorder
+from linkevo.workers.trial import TrialSpec, run_trial
 
 BATCH = 200
 OPTIONS = {

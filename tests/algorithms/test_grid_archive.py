@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from algorithms.archive import GridArchive
-from algorithms.individuals import Individuals
-from sim.descriptors import DESCRIPTOR_SPACES
+from linkevo.algorithms.archive import GridArchive
+from linkevo.algorithms.individuals import Individuals
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES
 
 
 def batch(loss: list[float], desc: list[list[float]], tag: float = 0.0) -> Individuals:

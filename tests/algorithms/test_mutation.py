@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from algorithms.mutation import bounce_back, initial_sigma, mutate
-from sim.genome import LENGTH_GENES, N_GENES
+from linkevo.algorithms.mutation import bounce_back, initial_sigma, mutate
+from linkevo.sim.genome import LENGTH_GENES, N_GENES
 
 OTHER_GENES = np.setdiff1d(np.arange(N_GENES), LENGTH_GENES)
 

@@ -8,7 +8,12 @@ import numpy as np
 import pytest
 from deap import base, creator, tools
 
-from algorithms.pareto import crowding_distance, hypervolume_2d, non_dominated_ranks, select_nsga2
+from linkevo.algorithms.pareto import (
+    crowding_distance,
+    hypervolume_2d,
+    non_dominated_ranks,
+    select_nsga2,
+)
 
 
 def brute_force_ranks(loss: np.ndarray) -> np.ndarray:

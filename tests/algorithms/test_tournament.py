@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from algorithms.selection import tournament
+from linkevo.algorithms.selection import tournament
 
 
 def test_tournament_winner_is_best_of_its_three_aspirants() -> None:

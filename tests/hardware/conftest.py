@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from hardware.config import RobotConfig, parse_config
-from hardware.emulator import BusEmulator
+from linkevo.hardware.config import RobotConfig, parse_config
+from linkevo.hardware.emulator import BusEmulator
 from tests.helpers.hexapod import TEST_IDS, raw_config, toml_text
 
 

@@ -7,10 +7,10 @@ import time
 import pytest
 from dynamixel_sdk import COMM_SUCCESS, GroupBulkRead, GroupBulkWrite, PacketHandler, PortHandler
 
-from hardware import control_table as ct
-from hardware import protocol as p
-from hardware.bus import DxlBus
-from hardware.errors import CommError, DeviceError, MotorNotResponding, PortError
+from linkevo.hardware import control_table as ct
+from linkevo.hardware import protocol as p
+from linkevo.hardware.bus import DxlBus
+from linkevo.hardware.errors import CommError, DeviceError, MotorNotResponding, PortError
 
 IDS = [1, 2, 3]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from hardware import control_table as ct
+from linkevo.hardware import control_table as ct
 
 
 def test_state_block_spans_126_to_146():

@@ -12,9 +12,9 @@ import pyarrow.parquet as pq
 import pytest
 from mlflow.tracking import MlflowClient
 
-from orchestrator.cli import main
-from workers.linkages import LinkageError, LinkageRef
-from workers.tracking import ensure_experiment
+from linkevo.orchestrator.cli import main
+from linkevo.workers.linkages import LinkageError, LinkageRef
+from linkevo.workers.tracking import ensure_experiment
 
 BEST_DOC = {"format": "test/1", "genome": [0.5] * 56, "note": "opaque to hardware/"}
 
@@ -117,7 +117,7 @@ def test_field_trials_round_trip_into_table_one(store, tmp_path, config_file, ca
 def test_cell_reference_builds_the_document_from_the_repertoire_genome(
     store, tmp_path, config_file, monkeypatch
 ):
-    from sim.linkage_doc import from_document, to_document
+    from linkevo.sim.linkage_doc import from_document, to_document
 
     uri, client, experiment_id = store
     genome = np.random.default_rng(7).random(56)

@@ -5,8 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hardware.config import GaitConfig, MotorConfig
-from hardware.gait import PhaseController, alignment_goals, leg_phase, phase_separation, wrap
+from linkevo.hardware.config import GaitConfig, MotorConfig
+from linkevo.hardware.gait import (
+    PhaseController,
+    alignment_goals,
+    leg_phase,
+    phase_separation,
+    wrap,
+)
 
 MOTORS = (
     MotorConfig(id=1, direction=1, phase_deg=0.0, zero=100),
@@ -73,7 +79,7 @@ def test_phase_separation_of_two_tripods():
 def walk_ideal_leg(gait: GaitConfig, seconds: float, held=(0.0, 0.0), lag_rpm: float = 0.0):
     """Returns the phase error in degrees at each 20 ms tick of one leg whose motor turns
     at the commanded speed less `lag_rpm`, except while `held` (start, end) stops it."""
-    from hardware.control_table import POSITION_UNITS_PER_TURN, VELOCITY_RPM_PER_UNIT
+    from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN, VELOCITY_RPM_PER_UNIT
 
     motor = (MotorConfig(id=1, direction=1, phase_deg=0.0, zero=0),)
     controller = PhaseController(gait, motor, np.array([1023]))

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
-from hardware import control_table as ct
-from hardware.config import GaitConfig
-from orchestrator.cli import main
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.config import GaitConfig
+from linkevo.orchestrator.cli import main
 from tests.helpers.hexapod import TEST_IDS
 
 LINKEVO = Path(sys.executable).parent / "linkevo"

@@ -13,9 +13,9 @@ import time
 import numpy as np
 import pytest
 
-from hardware import control_table as ct
-from hardware import protocol as p
-from hardware.errors import (
+from linkevo.hardware import control_table as ct
+from linkevo.hardware import protocol as p
+from linkevo.hardware.errors import (
     AlignmentError,
     HardwareError,
     MotorNotResponding,
@@ -24,9 +24,9 @@ from hardware.errors import (
     StopRequested,
     WrongModel,
 )
-from hardware.gait import leg_phase, phase_separation, wrap
-from hardware.hexapod import Hexapod
-from hardware.session import run_walk
+from linkevo.hardware.gait import leg_phase, phase_separation, wrap
+from linkevo.hardware.hexapod import Hexapod
+from linkevo.hardware.session import run_walk
 from tests.helpers.hexapod import TEST_IDS
 
 PHASE_TOLERANCE_DEG = 5.0

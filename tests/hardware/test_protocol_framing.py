@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from hardware import protocol as p
+from linkevo.hardware import protocol as p
 
 
 def test_crc16_check_value():

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from hardware.config import load_config, parse_config
-from hardware.errors import ConfigError
+from linkevo.hardware.config import load_config, parse_config
+from linkevo.hardware.errors import ConfigError
 from tests.helpers.hexapod import raw_config, toml_text
 
 REPO = Path(__file__).resolve().parents[2]

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from hardware import control_table as ct
-from hardware.bus import Status
-from hardware.config import MotorConfig, SafetyConfig
-from hardware.errors import SafetyStop
-from hardware.safety import REBOOT, SafetyMonitor
+from linkevo.hardware import control_table as ct
+from linkevo.hardware.bus import Status
+from linkevo.hardware.config import MotorConfig, SafetyConfig
+from linkevo.hardware.errors import SafetyStop
+from linkevo.hardware.safety import REBOOT, SafetyMonitor
 
 MOTORS = (MotorConfig(id=1, name="left-front"), MotorConfig(id=2))
 

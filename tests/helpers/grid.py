@@ -7,8 +7,8 @@ from pathlib import Path
 
 from mlflow.tracking import MlflowClient
 
-from orchestrator import config
-from orchestrator.grid import Grid
+from linkevo.orchestrator import config
+from linkevo.orchestrator.grid import Grid
 
 TINY = {
     "trials": 2,

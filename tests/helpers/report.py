@@ -20,8 +20,8 @@ import pyarrow.parquet as pq
 from mlflow.entities import Metric, Param, RunTag
 from mlflow.tracking import MlflowClient
 
-from sim.descriptors import DESCRIPTOR_SPACES, cell_index
-from sim.linkage_doc import to_document
+from linkevo.sim.descriptors import DESCRIPTOR_SPACES, cell_index
+from linkevo.sim.linkage_doc import to_document
 
 N_GENES = 56
 N_ANGLES = 40

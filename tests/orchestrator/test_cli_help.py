@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from orchestrator.cli import build_parser, main
+from linkevo.orchestrator.cli import build_parser, main
 
 
 def all_parsers(parser: argparse.ArgumentParser, name: str = "linkevo"):

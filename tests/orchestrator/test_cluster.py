@@ -7,9 +7,9 @@ import time
 
 import pytest
 
-from orchestrator.driver import launch
+from linkevo.orchestrator.driver import launch
+from linkevo.workers.tracking import ensure_experiment
 from tests.helpers.grid import running_on, runs_by_key, tiny_grid
-from workers.tracking import ensure_experiment
 
 pytestmark = pytest.mark.ray
 
@@ -69,8 +69,8 @@ def test_actors_on_other_nodes_get_their_rows_through_the_object_store(cluster):
         remove_placement_group,
     )
 
-    from sim import evaluate, random_genomes
-    from workers.ray_evaluator import ActorPoolEvaluator
+    from linkevo.sim import evaluate, random_genomes
+    from linkevo.workers.ray_evaluator import ActorPoolEvaluator
 
     group = placement_group([{"CPU": 1}, {"CPU": 1}], strategy="STRICT_SPREAD")
     ray.get(group.ready(), timeout=60)

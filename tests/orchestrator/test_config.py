@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator import config
-from orchestrator.config import ConfigError, GridConfig
+from linkevo.orchestrator import config
+from linkevo.orchestrator.config import ConfigError, GridConfig
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 

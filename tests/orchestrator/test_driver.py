@@ -13,11 +13,11 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
-from orchestrator.config import ConfigError
-from orchestrator.driver import launch, summary, trial_dir, work_root
-from orchestrator.grid import CODE_VERSION_ENV
+from linkevo.orchestrator.config import ConfigError
+from linkevo.orchestrator.driver import launch, summary, trial_dir, work_root
+from linkevo.orchestrator.grid import CODE_VERSION_ENV
+from linkevo.workers.tracking import ensure_experiment
 from tests.helpers.grid import runs_by_key, tiny_grid
-from workers.tracking import ensure_experiment
 
 pytestmark = pytest.mark.ray
 

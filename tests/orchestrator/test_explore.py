@@ -16,16 +16,16 @@ import pytest
 from mlflow.entities import Param
 from mlflow.tracking import MlflowClient
 
-from orchestrator.cli import main
-from orchestrator.explore import TrialRun, repertoire_view
-from sim import decode, simulate
-from sim.physical import physical_checks
-from workers.evaluators import LocalEvaluator
-from workers.linkages import repertoire
-from workers.mlflow_recorder import MlflowRecorder
-from workers.tracking import ensure_experiment
-from workers.trial import TrialSpec, run_trial
-from workers.trial_task import SPEC_PARAMS
+from linkevo.orchestrator.cli import main
+from linkevo.orchestrator.explore import TrialRun, repertoire_view
+from linkevo.sim import decode, simulate
+from linkevo.sim.physical import physical_checks
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.linkages import repertoire
+from linkevo.workers.mlflow_recorder import MlflowRecorder
+from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial_task import SPEC_PARAMS
 
 GRID = "e0e0e0e0e0e0"
 CHROMIUM = Path("/usr/bin/chromium")

@@ -14,10 +14,10 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.cli import main
-from orchestrator.config import GridConfig
-from orchestrator.grid import Grid, trial_seed
-from workers.tracking import ensure_experiment
+from linkevo.orchestrator.cli import main
+from linkevo.orchestrator.config import GridConfig
+from linkevo.orchestrator.grid import Grid, trial_seed
+from linkevo.workers.tracking import ensure_experiment
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 

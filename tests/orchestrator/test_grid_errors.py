@@ -7,7 +7,7 @@ import socket
 import pytest
 import ray
 
-from orchestrator.cli import main
+from linkevo.orchestrator.cli import main
 from tests.helpers.grid import tiny_config_file
 
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
-from orchestrator import config
-from orchestrator.grid import Grid
-from orchestrator.local_cluster import (
+from linkevo.orchestrator import config
+from linkevo.orchestrator.grid import Grid
+from linkevo.orchestrator.local_cluster import (
     ClusterError,
     ClusterSettings,
     ClusterState,
@@ -40,7 +40,7 @@ def cluster(tmp_path_factory) -> ClusterState:
 
 def linkevo(*args: str, env: dict[str, str], cwd: Path) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "orchestrator", *args],
+        [sys.executable, "-m", "linkevo.orchestrator", *args],
         env={**os.environ, **env},
         cwd=cwd,
         stdout=subprocess.PIPE,
@@ -113,7 +113,7 @@ def test_a_grid_survives_a_stopped_worker_node_and_reads_back_through_the_server
 
 
 def test_down_leaves_no_process_or_port_behind(cluster: ClusterState) -> None:
-    from orchestrator.local_cluster import _processes_using, _session_members
+    from linkevo.orchestrator.local_cluster import _processes_using, _session_members
 
     sessions = [n.sid for n in cluster.nodes] + [cluster.mlflow_sid]
     assert all(_session_members(sid) for sid in sessions)

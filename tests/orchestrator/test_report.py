@@ -14,16 +14,16 @@ from mlflow.tracking import MlflowClient
 from PIL import Image
 from scipy.stats import mannwhitneyu
 
-from orchestrator.cli import main
-from orchestrator.report import build_report, load_grid
-from orchestrator.report import figures as fig
-from orchestrator.report.checks import checks_summary
-from orchestrator.report.findings import NOT_TESTABLE, REPRODUCED, check_findings
-from orchestrator.report.html import table_html
-from orchestrator.report.stats import holm, pairwise_tests
-from sim import decode, simulate
-from sim.linkage_doc import from_document
-from sim.physical import physical_checks
+from linkevo.orchestrator.cli import main
+from linkevo.orchestrator.report import build_report, load_grid
+from linkevo.orchestrator.report import figures as fig
+from linkevo.orchestrator.report.checks import checks_summary
+from linkevo.orchestrator.report.findings import NOT_TESTABLE, REPRODUCED, check_findings
+from linkevo.orchestrator.report.html import table_html
+from linkevo.orchestrator.report.stats import holm, pairwise_tests
+from linkevo.sim import decode, simulate
+from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.physical import physical_checks
 from tests.helpers.report import GridSpec, write_grid
 
 SPEC = GridSpec(
@@ -324,7 +324,7 @@ def test_compare_puts_two_grids_side_by_side(tmp_path, capsys):
     compared with the statistics recomputed here from the raw losses."""
     first = write_grid(tmp_path / "a", GridSpec(grid_id="g0first", seed=1))
     second = write_grid(tmp_path / "b", GridSpec(grid_id="g0second", seed=2), server_uri=first.uri)
-    from orchestrator.report.compare import compare_grids
+    from linkevo.orchestrator.report.compare import compare_grids
 
     table = compare_grids(first.uri, "g0first", "g0second")
     assert len(table) == 4 * 2

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 from scipy.stats import mannwhitneyu
 
-from orchestrator.report.html import context
-from orchestrator.report.stats import mann_whitney, pairwise_tests, summary_table
+from linkevo.orchestrator.report.html import context
+from linkevo.orchestrator.report.stats import mann_whitney, pairwise_tests, summary_table
 
 
 def trials(losses: dict[tuple[str, str], list[float]]) -> pd.DataFrame:

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-import sim
-from sim import reference
-from sim.fitness import named_target
+from linkevo import sim
+from linkevo.sim import reference
+from linkevo.sim.fitness import named_target
 
 EVALUATORS = [sim.evaluate, reference.evaluate_reference]
 

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import sim
-from orchestrator.cli import main
-from sim.fitness import named_target
-from sim.linkage_doc import to_document
+from linkevo import sim
+from linkevo.orchestrator.cli import main
+from linkevo.sim.fitness import named_target
+from linkevo.sim.linkage_doc import to_document
 
 
 @pytest.fixture
@@ -31,7 +31,7 @@ def linkevo(capsys, monkeypatch):
 
 def test_console_entry_point_runs(tmp_path):
     done = subprocess.run(
-        [sys.executable, "-m", "orchestrator", "eval", "missing.npy", "--out", "r.npz"],
+        [sys.executable, "-m", "linkevo.orchestrator", "eval", "missing.npy", "--out", "r.npz"],
         cwd=tmp_path,
         capture_output=True,
         text=True,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim import Evaluation, evaluate, random_genomes
-from sim.evaluation import ALIGNMENT, field_shapes
+from linkevo.sim import Evaluation, evaluate, random_genomes
+from linkevo.sim.evaluation import ALIGNMENT, field_shapes
 
 
 @pytest.mark.parametrize("fitness", ["Fp", "Fsl", "Fp2", "Fsl2"])

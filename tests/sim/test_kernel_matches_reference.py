@@ -13,9 +13,9 @@ import sys
 import numpy as np
 import pytest
 
-import sim
-from sim import reference
-from sim.genome import MAX_BEAMS
+from linkevo import sim
+from linkevo.sim import reference
+from linkevo.sim.genome import MAX_BEAMS
 
 ATOL = 1e-9
 FIELDS = ("loss", "error", "angle_error", "valid", "foot", "foot_x", "foot_y")
@@ -171,7 +171,7 @@ def test_angle_error_when_the_foot_beam_angles_cancel_exactly(mode):
 def test_helpers_compile_inlined_with_noalias_arrays():
     """The build `sim_throughput` measures: a numba without the `noalias` flag would fall
     back, silently, to the slower build (equal outputs), and this would say so."""
-    from sim import kernels
+    from linkevo.sim import kernels
 
     assert kernels.NOALIAS == {"_noalias": True}
     assert kernels._JIT["_noalias"] and kernels._JIT["forceinline"]

@@ -13,9 +13,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import sim
-from sim import reference
-from sim.genome import MAX_BEAMS, N_NODES
+from linkevo import sim
+from linkevo.sim import reference
+from linkevo.sim.genome import MAX_BEAMS, N_NODES
 
 T = reference.TOLERANCE
 EXACT = 1e-9

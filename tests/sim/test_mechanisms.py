@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-import sim
-from sim import reference
+from linkevo import sim
+from linkevo.sim import reference
 
 T = reference.TOLERANCE
 ANGLES = np.arange(40) * 2.0 * math.pi / 40

@@ -10,9 +10,9 @@ import math
 
 import numpy as np
 
-import sim
-from sim import reference
-from sim.genome import BLOCK_SIZE, FIRST_BLOCK, N_BLOCKS
+from linkevo import sim
+from linkevo.sim import reference
+from linkevo.sim.genome import BLOCK_SIZE, FIRST_BLOCK, N_BLOCKS
 
 T = reference.TOLERANCE
 

@@ -8,14 +8,14 @@ import sys
 import numpy as np
 import pytest
 
-import sim
-from sim import kernels
+from linkevo import sim
+from linkevo.sim import kernels
 
 SCRIPT = """
 import sys
 import numpy as np
-import sim
-from sim import kernels
+from linkevo import sim
+from linkevo.sim import kernels
 assert kernels.NOALIAS == {} and "_noalias" not in kernels._JIT
 assert "_noalias" not in kernels.place_triangle.targetoptions
 genomes = np.load(sys.argv[1])

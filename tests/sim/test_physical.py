@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-import sim
-from sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from linkevo import sim
+from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 
 
 def plain_checks(batch: sim.LinkageBatch, motion: sim.Motion, i: int) -> dict:

@@ -7,11 +7,11 @@ import sys
 import numpy as np
 import pytest
 
-import sim
-from sim import decode, simulate
-from sim.linkage_doc import to_document
-from sim.physical import physical_checks
-from sim.pylinkage_export import to_pylinkage
+from linkevo import sim
+from linkevo.sim import decode, simulate
+from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.physical import physical_checks
+from linkevo.sim.pylinkage_export import to_pylinkage
 
 SUBSTEPS = 10
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from PIL import Image
 
-import sim
-from orchestrator.pull import lego_build
-from sim.linkage_doc import to_document
-from workers.build_drawings import (
+from linkevo import sim
+from linkevo.orchestrator.pull import lego_build
+from linkevo.sim.linkage_doc import to_document
+from linkevo.workers.build_drawings import (
     A4_MM,
     PAGE_MARGIN_MM,
     SCALE_BAR_MM,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from mlflow.tracking import MlflowClient
 
-from workers.mlflow_recorder import MAX_BATCH, MlflowRecorder
-from workers.tracking import ensure_experiment
+from linkevo.workers.mlflow_recorder import MAX_BATCH, MlflowRecorder
+from linkevo.workers.tracking import ensure_experiment
 
 NAMES = [f"metric_{k}" for k in range(12)]
 

@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim import Evaluation, GenomeError, evaluate, random_genomes
-from workers.ray_evaluator import ActorPoolEvaluator, EvaluatorWorker
-from workers.result_pool import KEEP
-from workers.shared_batch import SHARED_DIR, SharedBatch, SharedLayout
+from linkevo.sim import Evaluation, GenomeError, evaluate, random_genomes
+from linkevo.workers.ray_evaluator import ActorPoolEvaluator, EvaluatorWorker
+from linkevo.workers.result_pool import KEEP
+from linkevo.workers.shared_batch import SHARED_DIR, SharedBatch, SharedLayout
 
 pytestmark = pytest.mark.ray
 
@@ -165,11 +165,11 @@ def test_an_error_raised_in_an_actor_reaches_the_caller(ray_local):
 def test_pool_falls_back_to_the_object_store_when_no_batch_file_can_be_made(
     ray_local, monkeypatch, tmp_path
 ):
-    import workers.shared_batch
+    import linkevo.workers.shared_batch
 
     genomes = random_genomes(np.random.default_rng(8), 50)
     with start_pool("Fp", shared_memory=True) as pool:
-        monkeypatch.setattr(workers.shared_batch, "SHARED_DIR", tmp_path / "missing")
+        monkeypatch.setattr(linkevo.workers.shared_batch, "SHARED_DIR", tmp_path / "missing")
         with pytest.warns(RuntimeWarning, match="shared-memory batches unavailable"):
             assert_same(pool(genomes), evaluate(genomes, "Fp"))
         assert_same(pool(genomes), evaluate(genomes, "Fp"))

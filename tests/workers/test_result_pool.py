@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim import evaluate, random_genomes
-from workers.evaluators import LocalEvaluator
-from workers.result_pool import KEEP, MemoryBuffer, ResultPool
+from linkevo.sim import evaluate, random_genomes
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.result_pool import KEEP, MemoryBuffer, ResultPool
 
 
 def test_local_evaluator_reuses_a_buffer_only_once_its_results_are_dropped():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.cli import main
+from linkevo.orchestrator.cli import main
 
 SMALL = ["--evaluations", "300", "--batch-size", "100", "--n-angles", "12", "--no-progress"]
 

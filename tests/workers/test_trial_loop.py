@@ -13,11 +13,11 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from sim.linkage_doc import from_document
-from workers.artifacts import read_npz
-from workers.evaluators import LocalEvaluator
-from workers.recorders import NullRecorder
-from workers.trial import TrialSpec, TrialSpecError, build_optimizer, run_trial
+from linkevo.sim.linkage_doc import from_document
+from linkevo.workers.artifacts import read_npz
+from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.recorders import NullRecorder
+from linkevo.workers.trial import TrialSpec, TrialSpecError, build_optimizer, run_trial
 
 BATCH = 100
 
