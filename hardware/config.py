@@ -10,17 +10,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
-from hardware.control_table import POSITION_UNITS_PER_TURN
-from hardware.errors import ConfigError
-from hardware.protocol import MAX_ID
+from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN
+from linkevo.hardware.errors import ConfigError
+from linkevo.hardware.protocol import MAX_ID
+from linkevo.sim.gait import GaitConfig, limits
 
 T = TypeVar("T")
-
-
-def _range(
-    low: float | None = None, high: float | None = None, *, open_high: bool = False
-) -> dict[str, object]:
-    return {"low": low, "high": high, "open_high": open_high}
 
 
 @dataclass(frozen=True)
@@ -29,60 +24,43 @@ class BusConfig:
 
     port: str = "/dev/ttyUSB0"
     baudrate: int = 1_000_000
-    latency_ms: float = field(default=16.0, metadata=_range(0.0, 1000.0))
-
-
-@dataclass(frozen=True)
-class GaitConfig:
-    """Clock rate, leg speed and the PID on the wrapped phase error.
-
-    Gains map a phase error in radians to a leg-speed correction in rpm.
-    """
-
-    rate_hz: float = field(default=50.0, metadata=_range(1.0, 500.0))
-    speed_rpm: float = field(default=25.0, metadata=_range(-60.0, 60.0))
-    kp: float = field(default=10.0, metadata=_range(0.0))
-    ki: float = field(default=2.0, metadata=_range(0.0))
-    kd: float = field(default=0.2, metadata=_range(0.0))
-    integral_limit_rpm: float = field(default=10.0, metadata=_range(0.0))
-    integral_band_deg: float = field(default=15.0, metadata=_range(0.0, 180.0))
-    max_lag_s: float = field(default=0.25, metadata=_range(0.0))
+    latency_ms: float = field(default=16.0, metadata=limits(0.0, 1000.0))
 
 
 @dataclass(frozen=True)
 class AlignConfig:
     """Alignment to the phase offsets in position mode before walking."""
 
-    profile_velocity_rpm: float = field(default=15.0, metadata=_range(0.3, 50.0))
-    tolerance_deg: float = field(default=3.0, metadata=_range(0.1, 45.0))
-    timeout_s: float = field(default=15.0, metadata=_range(0.1))
+    profile_velocity_rpm: float = field(default=15.0, metadata=limits(0.3, 50.0))
+    tolerance_deg: float = field(default=3.0, metadata=limits(0.1, 45.0))
+    timeout_s: float = field(default=15.0, metadata=limits(0.1))
 
 
 @dataclass(frozen=True)
 class SafetyConfig:
     """Limits watched every tick and what to do on a hardware error (see docs/hardware.md)."""
 
-    max_temperature_c: float = field(default=70.0, metadata=_range(0.0, 80.0))
-    min_voltage_v: float = field(default=10.0, metadata=_range(0.0))
-    max_voltage_v: float = field(default=16.0, metadata=_range(0.0))
-    max_load_percent: float = field(default=90.0, metadata=_range(0.0, 100.0))
-    load_hold_s: float = field(default=1.0, metadata=_range(0.0))
+    max_temperature_c: float = field(default=70.0, metadata=limits(0.0, 80.0))
+    min_voltage_v: float = field(default=10.0, metadata=limits(0.0))
+    max_voltage_v: float = field(default=16.0, metadata=limits(0.0))
+    max_load_percent: float = field(default=90.0, metadata=limits(0.0, 100.0))
+    load_hold_s: float = field(default=1.0, metadata=limits(0.0))
     on_hardware_error: str = field(default="stop", metadata={"choices": ("stop", "reboot")})
-    max_reboots: int = field(default=3, metadata=_range(0))
-    reboot_window_s: float = field(default=300.0, metadata=_range(0.0))
-    bus_watchdog_ms: int = field(default=200, metadata=_range(0, 2540))
-    max_missed_ticks: int = field(default=3, metadata=_range(1))
+    max_reboots: int = field(default=3, metadata=limits(0))
+    reboot_window_s: float = field(default=300.0, metadata=limits(0.0))
+    bus_watchdog_ms: int = field(default=200, metadata=limits(0, 2540))
+    max_missed_ticks: int = field(default=3, metadata=limits(1))
 
 
 @dataclass(frozen=True)
 class MotorConfig:
     """One leg's motor: id, mounting direction, tripod phase offset and calibrated zero."""
 
-    id: int = field(metadata=_range(0, MAX_ID))
+    id: int = field(metadata=limits(0, MAX_ID))
     name: str = ""
     direction: int = field(default=1, metadata={"choices": (1, -1)})
-    phase_deg: float = field(default=0.0, metadata=_range(0.0, 360.0, open_high=True))
-    zero: int = field(default=0, metadata=_range(0, POSITION_UNITS_PER_TURN - 1))
+    phase_deg: float = field(default=0.0, metadata=limits(0.0, 360.0, open_high=True))
+    zero: int = field(default=0, metadata=limits(0, POSITION_UNITS_PER_TURN - 1))
 
     @property
     def label(self) -> str:

@@ -3,29 +3,30 @@
 A field trial is one MLflow run (tag `linkevo.kind=field_trial`) in the source linkage's
 experiment: the measured distances (metric `distance_cm`, one step per repeat, and
 `mean_distance_cm`), the linkage document (`linkage.json`) and each repeat's telemetry.
+Its param `simulated` says where it walked: `False` on the robot, `True` on the bus
+emulator (the driver's dry run; distances typed in), `physics` in the 3-D simulation
+(`linkevo hexapod simulate`, distances predicted).
 """
 
 from __future__ import annotations
 
 import statistics
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hardware.config import RobotConfig
-from hardware.session import run_walk
-from workers.linkages import SourceLinkage
-from workers.tracking import ensure_experiment
-
-if TYPE_CHECKING:
-    pass
+from linkevo.hardware.config import RobotConfig
+from linkevo.hardware.session import run_walk
+from linkevo.workers.linkages import SourceLinkage
+from linkevo.workers.tracking import ensure_experiment
 
 KIND_TAG = "linkevo.kind"
 KIND = "field_trial"
 ROBOTS = ("first", "modified")
+REAL, EMULATOR, PHYSICS = "False", "True", "physics"
+"""The values of a field trial's `simulated` param."""
 STUDY_APPROACHES = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
 """Row order of the study's Table I; other approaches follow alphabetically."""
 
@@ -69,8 +70,16 @@ def log_field_trial(
     distances: list[float],
     params: dict[str, str],
     telemetry: tuple[Path, ...] | list[Path] = (),
+    metrics: dict[str, float] | None = None,
+    tags: dict[str, str] | None = None,
+    artifacts: dict[str, dict] | None = None,
 ) -> str:
-    """Logs one field-trial run in the source's experiment and returns its run id."""
+    """Logs one field-trial run in the source's experiment and returns its run id.
+
+    Args:
+        metrics, tags: more of either (a simulated trial's figures, its verdict).
+        artifacts: JSON documents by artefact name.
+    """
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=uri)
@@ -83,6 +92,7 @@ def log_field_trial(
         "fitness": source.fitness,
         "robot": robot,
         "floor": floor,
+        **(tags or {}),
     }
     run = client.create_run(
         experiment_id, run_name=f"field-{source.approach}-{robot}-{floor}", tags=tags
@@ -92,10 +102,16 @@ def log_field_trial(
         client.log_param(run_id, name, value)
     for step, distance in enumerate(distances):
         client.log_metric(run_id, "distance_cm", distance, step=step)
-    client.log_metric(run_id, "mean_distance_cm", statistics.fmean(distances))
+    if distances:
+        client.log_metric(run_id, "mean_distance_cm", statistics.fmean(distances))
+    for name, value in (metrics or {}).items():
+        client.log_metric(run_id, name, value)
     client.log_dict(run_id, source.document, "linkage.json")
+    for name, document in (artifacts or {}).items():
+        client.log_dict(run_id, document, name)
     for path in telemetry:
-        client.log_artifact(run_id, str(path), "telemetry")
+        folder = "telemetry" if path.suffix == ".csv" else "pictures"
+        client.log_artifact(run_id, str(path), folder)
     client.set_terminated(run_id)
     return run_id
 
@@ -107,30 +123,40 @@ class TrialTable:
     Attributes:
         approaches: row order.
         floors: column order within each robot (first seen first).
-        means: (approach, robot, floor) -> mean distance in cm.
+        means: (approach, robot, floor) -> mean distance in cm of the shown trials.
         counts: (approach, robot, floor) -> number of repeats.
-        simulated: True when the table holds the simulated field trials (`--simulate`)
-            instead of the real ones.
-        left_out: field-trial runs of the other kind (simulated or real), not shown.
+        predicted: (approach, robot, floor) -> mean distance in cm predicted by the 3-D
+            simulation, or "breaks" (shown beside the real trials).
+        simulated: True when the table holds the emulator's dry runs instead of the real
+            trials.
+        left_out: field-trial runs not shown (the emulator's, or the real ones).
     """
 
     approaches: tuple[str, ...]
     floors: tuple[str, ...]
     means: dict[tuple[str, str, str], float]
     counts: dict[tuple[str, str, str], int]
+    predicted: dict[tuple[str, str, str], float | str] = field(default_factory=dict)
     simulated: bool = False
     left_out: int = 0
 
     def format(self) -> str:
-        """Returns the table as aligned text in the study's Table I layout."""
+        """Returns the table as aligned text in the study's Table I layout; beside the real
+        trials, each cell shows "real / predicted" where a prediction exists."""
         head = ["Approach"] + [f"{r.capitalize()} robot: {f}" for r in ROBOTS for f in self.floors]
         rows = [head]
         for approach in self.approaches:
             cells = [approach]
             for robot in ROBOTS:
                 for floor in self.floors:
-                    mean = self.means.get((approach, robot, floor))
-                    cells.append("–" if mean is None else f"{mean:.1f} cm")
+                    key = (approach, robot, floor)
+                    mean = self.means.get(key)
+                    text = "–" if mean is None else f"{mean:.1f} cm"
+                    if self.predicted:
+                        guess = self.predicted.get(key)
+                        guess = "–" if guess is None else guess
+                        text += f" / {guess}" if isinstance(guess, str) else f" / {guess:.1f} cm"
+                    cells.append(text)
             rows.append(cells)
         widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
         lines = [" | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
@@ -139,8 +165,9 @@ class TrialTable:
 
 
 def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialTable:
-    """Returns the Table I summary of the experiment's real field trials, or with
-    `simulated` of its simulated ones (walked on the bus emulator): the two never mix."""
+    """Returns the Table I summary of the experiment's real field trials beside the 3-D
+    simulation's predictions for the same approach, robot and floor, or with `simulated`
+    the emulator's dry runs alone."""
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=uri)
@@ -153,26 +180,43 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
         order_by=["attributes.start_time ASC"],
         max_results=10_000,
     )
+    shown_kind = EMULATOR if simulated else REAL
     distances: dict[tuple[str, str, str], list[float]] = {}
+    predicted: dict[tuple[str, str, str], list[float]] = {}
+    broken: set[tuple[str, str, str]] = set()
     floors: list[str] = []
-    kept = [r for r in runs if (r.data.params.get("simulated") == "True") == simulated]
-    for run in kept:
+    left_out = 0
+    for run in runs:
+        kind = run.data.params.get("simulated", REAL)
+        if kind not in (shown_kind, PHYSICS) or (simulated and kind == PHYSICS):
+            left_out += 1
+            continue
         tags = run.data.tags
         floor = tags.get("floor", "?")
         if floor not in floors:
             floors.append(floor)
         key = (tags.get("approach", "unknown"), tags.get("robot", "first"), floor)
-        history = client.get_metric_history(run.info.run_id, "distance_cm")
-        distances.setdefault(key, []).extend(m.value for m in history)
-    present = {key[0] for key in distances}
+        history = [m.value for m in client.get_metric_history(run.info.run_id, "distance_cm")]
+        if kind == PHYSICS:
+            predicted.setdefault(key, []).extend(history)
+            if tags.get("breaks") == "True":
+                broken.add(key)
+        else:
+            distances.setdefault(key, []).extend(history)
+    present = {key[0] for key in [*distances, *predicted]}
     approaches = tuple(a for a in STUDY_APPROACHES if a in present) + tuple(
         sorted(present - set(STUDY_APPROACHES))
     )
+    guesses: dict[tuple[str, str, str], float | str] = {
+        k: statistics.fmean(v) for k, v in predicted.items() if v
+    }
+    guesses |= dict.fromkeys(broken, "breaks")
     return TrialTable(
         approaches=approaches,
         floors=tuple(floors),
         means={k: statistics.fmean(v) for k, v in distances.items() if v},
         counts={k: len(v) for k, v in distances.items()},
+        predicted=guesses,
         simulated=simulated,
-        left_out=len(runs) - len(kept),
+        left_out=left_out,
     )

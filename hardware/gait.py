@@ -1,4 +1,5 @@
-"""Provides the tripod phase model and PhaseController, the PID that keeps legs on the clock.
+"""Provides the robot's side of the tripod gait: leg phases from motor positions, and
+PhaseController, which runs the gait's PID (`sim.gait`) in motor units.
 
 Leg i's phase is `theta_i = 2*pi * ((d_i * (p_i - z_i)) mod 4096) / 4096`, where `p_i` is
 the motor's signed multi-turn Present Position, `z_i` its calibrated zero and `d_i` its
@@ -10,15 +11,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from hardware.config import GaitConfig, MotorConfig
-from hardware.control_table import POSITION_UNITS_PER_TURN, VELOCITY_RPM_PER_UNIT
+from linkevo.hardware.config import GaitConfig, MotorConfig
+from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN, VELOCITY_RPM_PER_UNIT
+from linkevo.sim.gait import TWO_PI, PhasePid, wrap
 
-TWO_PI = 2.0 * np.pi
-
-
-def wrap(angle: np.ndarray) -> np.ndarray:
-    """Returns angles wrapped to [-pi, pi). Shape preserved."""
-    return (np.asarray(angle, dtype=float) + np.pi) % TWO_PI - np.pi
+__all__ = ["PhaseController", "alignment_goals", "leg_phase", "phase_separation", "wrap"]
 
 
 def leg_phase(positions: np.ndarray, zeros: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -42,7 +39,8 @@ def alignment_goals(motors: tuple[MotorConfig, ...]) -> np.ndarray:
 
 
 class PhaseController:
-    """Velocity feedforward plus a PID on each leg's wrapped phase error.
+    """The robot's side of the gait: `sim.gait.PhasePid` on phases read from Present
+    Position, its leg speeds turned into Goal Velocity units in each motor's frame.
 
     Args:
         gait: clock rate, speed and gains.
@@ -53,31 +51,22 @@ class PhaseController:
     def __init__(
         self, gait: GaitConfig, motors: tuple[MotorConfig, ...], velocity_limits: np.ndarray
     ) -> None:
-        self._gait = gait
         self._zeros = np.array([m.zero for m in motors], dtype=float)
         self._directions = np.array([m.direction for m in motors], dtype=float)
-        self._offsets = np.array([m.phase_rad for m in motors])
+        self._pid = PhasePid(gait, np.array([m.phase_rad for m in motors]))
         self._limits = np.asarray(velocity_limits, dtype=float)
-        self._t0 = 0.0
-        self._last_t: float | None = None
-        self._last_error = np.zeros(len(motors))
-        self._integral = np.zeros(len(motors))
 
     def reset(self, t0: float) -> None:
         """Starts the clock at `t0` (seconds) and clears the PID state."""
-        self._t0 = t0
-        self._last_t = None
-        self._last_error[:] = 0.0
-        self._integral[:] = 0.0
+        self._pid.reset(t0)
 
     def targets(self, t: float) -> np.ndarray:
         """Returns (N,) target phases at time `t`, in [0, 2*pi)."""
-        turns = self._gait.speed_rpm / 60.0 * (t - self._t0)
-        return np.mod(TWO_PI * turns + self._offsets, TWO_PI)
+        return self._pid.targets(t)
 
     def phase_errors(self, t: float, positions: np.ndarray) -> np.ndarray:
         """Returns (N,) wrapped target-minus-measured phase errors in [-pi, pi)."""
-        return wrap(self.targets(t) - leg_phase(positions, self._zeros, self._directions))
+        return self._pid.errors(t, leg_phase(positions, self._zeros, self._directions))
 
     def command(self, t: float, positions: np.ndarray) -> np.ndarray:
         """Returns (N,) integer Goal Velocities (motor frame, clamped to the limits).
@@ -86,22 +75,7 @@ class PhaseController:
             t: the tick's time in seconds (same clock as `reset`).
             positions: (N,) signed Present Positions read this tick.
         """
-        gait = self._gait
-        error = self.phase_errors(t, positions)
-        dt = 0.0 if self._last_t is None else t - self._last_t
-        derivative = np.zeros_like(error)
-        if dt > 0.0:
-            # Integrate only near the clock: a leg that was held or slipped far behind
-            # would otherwise wind the integral up and overshoot for kp / ki seconds.
-            near = np.abs(error) <= np.radians(gait.integral_band_deg)
-            self._integral += np.where(near, error * dt, 0.0)
-            if gait.ki > 0.0:
-                bound = gait.integral_limit_rpm / gait.ki
-                np.clip(self._integral, -bound, bound, out=self._integral)
-            derivative = wrap(error - self._last_error) / dt
-        self._last_t = t
-        self._last_error = error
-        rpm = gait.speed_rpm + gait.kp * error + gait.ki * self._integral + gait.kd * derivative
+        rpm = self._pid.rpm(t, leg_phase(positions, self._zeros, self._directions))
         units = np.round(self._directions * rpm / VELOCITY_RPM_PER_UNIT)
         return np.clip(units, -self._limits, self._limits).astype(int)
 

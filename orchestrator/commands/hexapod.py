@@ -1,19 +1,21 @@
-"""Provides `linkevo hexapod`: walk the robot, run field trials, print the study's Table I."""
+"""Provides `linkevo hexapod`: walk the robot, run field trials (real, or simulated in 3-D),
+print the study's Table I."""
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import signal
 import sys
 import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from orchestrator.cli import CliError
+from linkevo.orchestrator.cli import CliError
 
 if TYPE_CHECKING:
-    from hardware.config import RobotConfig
+    from linkevo.hardware.config import RobotConfig
 
 DEFAULT_CONFIG = Path("configs/hexapod.toml")
 _TRACKING_HELP = "MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)"
@@ -52,13 +54,68 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     trial.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
     trial.set_defaults(func=trial_handler)
 
+    simulate = sub.add_parser(
+        "simulate",
+        help="walk a linkage's robot in 3-D physics (MuJoCo): Table I's protocol, predicted",
+        description=(
+            "Walks the study's hexapod with six copies of the linkage (its LEGO build) in "
+            "MuJoCo, with the gait of the robot config, and reports the distance walked along "
+            "the starting heading per repeat, whether the robot breaks and why, and what a "
+            "builder needs to trust the number (docs/walking.md). Logged as a field trial "
+            "marked simulated, so `linkevo hexapod table` shows it beside the real ones."
+        ),
+    )
+    simulate.add_argument(
+        "--linkage", required=True, help="RUN_ID, RUN_ID:CELL or a linkage document FILE.json"
+    )
+    simulate.add_argument("--floor", required=True, help="flat or carpet")
+    simulate.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
+    simulate.add_argument("--repeats", type=int, default=5, help="walks on this floor")
+    simulate.add_argument("--robot", default="first", help="first or modified (the table's row)")
+    simulate.add_argument("--seed", type=int, default=0, help="seeds the start's perturbation")
+    simulate.add_argument("--json", action="store_true", help="print one JSON object")
+    simulate.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="write the first walk's pictures here (walk.gif, walk.png, path.png, contacts.png)",
+    )
+    simulate.add_argument("--no-log", action="store_true", help="do not log to MLflow")
+    simulate.add_argument(
+        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
+    )
+    simulate.add_argument("--experiment", default="linkevo", help="experiment for a FILE.json")
+    simulate.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
+    simulate.set_defaults(func=simulate_handler)
+
+    study = sub.add_parser(
+        "study",
+        help="repeat the study's prototyping (Table I) on the simulated robot for a grid",
+        description=(
+            "For each MAP-Elites approach with F_p: the first robot (the best linkage of the "
+            "approach's best trial) and a modified robot chosen from its 5 × 5 downsampled "
+            "map, each walked on both floors in 3-D physics and logged as simulated field "
+            "trials (docs/walking.md)."
+        ),
+    )
+    study.add_argument("grid_id", help="the grid (its id, as `linkevo report` shows it)")
+    study.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
+    study.add_argument("--repeats", type=int, default=5, help="walks per robot and floor")
+    study.add_argument("--out", type=Path, default=None, help="write the table here as CSV")
+    study.add_argument(
+        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
+    )
+    study.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+    study.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
+    study.set_defaults(func=study_handler)
+
     table = sub.add_parser("table", help="print mean distances as in the study's Table I")
     table.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
     table.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
     table.add_argument(
         "--simulated",
         action="store_true",
-        help="show the simulated field trials (walked with --simulate) instead of the real ones",
+        help="show the emulator's dry runs (walked with --simulate) instead of the real trials",
     )
     table.set_defaults(func=table_handler)
 
@@ -73,8 +130,8 @@ def _robot_options(parser: argparse.ArgumentParser) -> None:
 
 
 def _load(args: argparse.Namespace) -> RobotConfig:
-    from hardware.config import load_config
-    from hardware.errors import ConfigError
+    from linkevo.hardware.config import load_config
+    from linkevo.hardware.errors import ConfigError
 
     if not math.isfinite(args.seconds) or args.seconds <= 0:
         raise CliError(f"--seconds {args.seconds}: allowed a positive number of seconds")
@@ -90,8 +147,8 @@ def _exit_code(signal_name: str) -> int:
 
 def walk_handler(args: argparse.Namespace) -> int:
     """Walks once and prints the achieved tick rate."""
-    from hardware.errors import HardwareError, ShutdownIncomplete, StopRequested
-    from hardware.session import run_walk
+    from linkevo.hardware.errors import HardwareError, ShutdownIncomplete, StopRequested
+    from linkevo.hardware.session import run_walk
 
     config = _load(args)
     try:
@@ -138,10 +195,10 @@ def trial_handler(args: argparse.Namespace) -> int:
     """Walks the repeats, records the distances and logs a field-trial MLflow run."""
     from mlflow.tracking import MlflowClient
 
-    from hardware.errors import HardwareError, StopRequested
-    from hardware.field_trial import ROBOTS, log_field_trial, walk_repeats
-    from workers.linkages import LinkageError, LinkageRef, load_source
-    from workers.tracking import resolve_tracking_uri
+    from linkevo.hardware.errors import HardwareError, StopRequested
+    from linkevo.hardware.field_trial import ROBOTS, log_field_trial, walk_repeats
+    from linkevo.workers.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.tracking import resolve_tracking_uri
 
     if args.robot not in ROBOTS:
         raise CliError(f"--robot {args.robot!r}: allowed {', '.join(ROBOTS)}")
@@ -208,20 +265,163 @@ def trial_handler(args: argparse.Namespace) -> int:
     return 0
 
 
+MAX_SIM_SECONDS = 600.0
+MAX_REPEATS = 100
+
+
+def simulate_handler(args: argparse.Namespace) -> int:
+    """Walks the linkage's robot in 3-D physics and prints (and logs) the predicted trial."""
+    import json
+
+    # MuJoCo picks its OpenGL back end at its first import: offscreen OSMesa unless the user
+    # chose one (egl where a GPU driver is present).
+    os.environ.setdefault("MUJOCO_GL", "osmesa")
+
+    from linkevo.hardware.field_trial import ROBOTS
+    from linkevo.orchestrator.simulate import log_simulated, simulate_source, write_pictures
+    from linkevo.sim.robot import FLOORS
+
+    if args.floor not in FLOORS:
+        raise CliError(f"--floor {args.floor!r}: allowed {', '.join(FLOORS)}")
+    if not math.isfinite(args.seconds) or not 0 < args.seconds <= MAX_SIM_SECONDS:
+        raise CliError(f"--seconds {args.seconds}: allowed a number in (0, {MAX_SIM_SECONDS:g}]")
+    if not 1 <= args.repeats <= MAX_REPEATS:
+        raise CliError(f"--repeats {args.repeats}: allowed an integer in [1, {MAX_REPEATS}]")
+    if args.robot not in ROBOTS:
+        raise CliError(f"--robot {args.robot!r}: allowed {', '.join(ROBOTS)}")
+    if args.seed < 0:
+        raise CliError(f"--seed {args.seed}: allowed an integer >= 0")
+    config = _load(args)
+    uri, source = _simulation_source(args)
+    try:
+        result, walks = simulate_source(
+            source,
+            args.floor,
+            config=config,
+            seconds=args.seconds,
+            repeats=args.repeats,
+            seed=args.seed,
+        )
+    except ValueError as exc:
+        raise CliError(str(exc)) from exc
+    pictures = []
+    if args.out is not None and walks:
+        title = f"{source.approach} {args.robot} robot, {args.floor} floor, repeat 1"
+        try:
+            pictures = write_pictures(walks[0], args.out, title)
+        except RuntimeError as exc:
+            raise CliError(str(exc)) from exc
+    if not args.no_log:
+        result["run_id"] = log_simulated(uri, source, args.robot, result, args.seed, pictures)
+    if args.json:
+        print(json.dumps(result))
+        return 0
+    print(_simulation_text(source, args.robot, result))
+    return 0
+
+
+def _simulation_source(args: argparse.Namespace):
+    """Returns (tracking URI, the source linkage) of `--linkage`."""
+    from mlflow.tracking import MlflowClient
+
+    from linkevo.orchestrator.simulate import document_source
+    from linkevo.workers.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.tracking import ensure_experiment, resolve_tracking_uri
+
+    uri = resolve_tracking_uri(args.tracking_uri)
+    path = Path(args.linkage)
+    if args.linkage.endswith(".json"):
+        if not path.is_file():
+            raise CliError(f"--linkage {args.linkage}: no such file")
+        experiment_id = "" if args.no_log else ensure_experiment(uri, args.experiment)
+        try:
+            return uri, document_source(path, experiment_id)
+        except ValueError as exc:
+            raise CliError(f"--linkage {exc}") from exc
+    try:
+        ref = LinkageRef.parse(args.linkage)
+        return uri, load_source(MlflowClient(tracking_uri=uri), ref)
+    except LinkageError as exc:
+        raise CliError(str(exc)) from exc
+
+
+def _simulation_text(source, robot: str, result: dict) -> str:
+    """The simulated trial as a few lines a builder reads."""
+    head = f"{source.approach} {robot} robot on the {result['floor']} floor"
+    lines = [f"{head} ({result['seconds']:g} s per walk, {result.get('leg', 'no leg')}):"]
+    if result["distance_cm"]:
+        walked = ", ".join("–" if d is None else f"{d:.1f}" for d in result["distance_cm"])
+        lines.append(
+            f"  distance {walked} cm; mean {result['mean_distance_cm']} cm "
+            f"(no-slip bound {result['bound_cm']} cm)"
+        )
+        lines.append(
+            f"  body {result['body_height_cm']} cm high, pitch ≤ {result['max_pitch_deg']}°, "
+            f"roll ≤ {result['max_roll_deg']}°, foot slip {result['foot_slip_mm_s']} mm/s"
+        )
+        lines.append(
+            f"  motor torque {result['torque_p95_of_stall']:.0%} of stall (95th pct), "
+            f"peak {result['torque_max_of_stall']:.0%}; pin force p50/p95/p99 "
+            f"{result['pin_force_p50_n']}/{result['pin_force_p95_n']}/"
+            f"{result['pin_force_p99_n']} N; loop closure within {result['loop_error_max_mm']} mm"
+        )
+    verdict = f"BREAKS: {result['reason']}" if result["breaks"] else "walks"
+    lines.append(f"  {verdict}")
+    if "run_id" in result:
+        lines.append(f"  logged as field trial {result['run_id']} (linkevo hexapod table)")
+    return "\n".join(lines)
+
+
+def study_handler(args: argparse.Namespace) -> int:
+    """Predicts the study's Table I for a grid and prints it (and writes it with --out)."""
+    from mlflow.tracking import MlflowClient
+
+    from linkevo.orchestrator.walk_study import predict_table_one
+    from linkevo.workers.artifacts import write_text_atomic
+    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+
+    if not math.isfinite(args.seconds) or not 0 < args.seconds <= MAX_SIM_SECONDS:
+        raise CliError(f"--seconds {args.seconds}: allowed a number in (0, {MAX_SIM_SECONDS:g}]")
+    if not 1 <= args.repeats <= MAX_REPEATS:
+        raise CliError(f"--repeats {args.repeats}: allowed an integer in [1, {MAX_REPEATS}]")
+    if args.out is not None and args.out.suffix != ".csv":
+        raise CliError(f"--out {args.out}: allowed a .csv file")
+    config = _load(args)
+    uri = require_store(resolve_tracking_uri(args.tracking_uri))
+    try:
+        table = predict_table_one(
+            uri,
+            MlflowClient(tracking_uri=uri),
+            args.grid_id,
+            args.experiment,
+            config=config,
+            seconds=args.seconds,
+            repeats=args.repeats,
+        )
+    except ValueError as exc:
+        raise CliError(str(exc)) from exc
+    if args.out is not None:
+        write_text_atomic(args.out, table.to_csv(index=False))
+        print(f"table: {args.out}")
+    return 0
+
+
 def table_handler(args: argparse.Namespace) -> int:
     """Prints the field-trial means in the study's Table I layout."""
-    from hardware.field_trial import FieldTrialError, trial_table
-    from workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.hardware.field_trial import FieldTrialError, trial_table
+    from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:
         table = trial_table(uri, args.experiment, simulated=args.simulated)
     except FieldTrialError as exc:
         raise CliError(str(exc)) from exc
-    kind = "simulated" if table.simulated else "real"
-    other = "real" if table.simulated else "simulated"
-    if not table.means:
+    kind = "emulator dry-run" if table.simulated else "real"
+    other = "real" if table.simulated else "emulator dry-run"
+    if not table.means and not table.predicted:
         print(f"no {kind} field trials logged in experiment {args.experiment!r}")
+    elif table.predicted:
+        print(f"Real field trials / predicted by the 3-D simulation:\n{table.format()}")
     else:
         print(f"{kind.capitalize()} field trials:\n{table.format()}")
     if table.left_out:

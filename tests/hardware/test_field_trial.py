@@ -97,12 +97,12 @@ def test_field_trials_round_trip_into_table_one(store, tmp_path, config_file, ca
     assert main(["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment]) == 0
     assert capsys.readouterr().out.splitlines() == [
         f"no real field trials logged in experiment {experiment!r}",
-        "4 simulated field-trial run(s) left out (--simulated shows them)",
+        "4 emulator dry-run field-trial run(s) left out (--simulated shows them)",
     ]
     argv = ["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment, "--simulated"]
     assert main(argv) == 0
     title, *lines = capsys.readouterr().out.splitlines()
-    assert title == "Simulated field trials:"
+    assert title == "Emulator dry-run field trials:"
     assert [c.strip() for c in lines[0].split("|")] == [
         "Approach",
         "First robot: flat",

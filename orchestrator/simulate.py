@@ -1,0 +1,183 @@
+"""Provides simulated field trials: a tracked or pulled linkage walked on the 3-D robot
+(`sim.walk`) with the real robot's gait from its config, summarised as Table I reads it,
+and logged as a field trial marked `simulated=physics`."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from linkevo.hardware.field_trial import PHYSICS, log_field_trial
+from linkevo.sim.leg import LegError, leg_from_genome
+from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.robot import LEG_SLOTS, floor
+from linkevo.sim.walk import Walk, WalkSettings, field_trials, summary
+from linkevo.workers.linkages import SourceLinkage
+
+if TYPE_CHECKING:
+    from linkevo.hardware.config import RobotConfig
+
+FIGURES = (
+    "bound_cm",
+    "body_height_cm",
+    "min_clearance_cm",
+    "max_pitch_deg",
+    "max_roll_deg",
+    "foot_slip_mm_s",
+    "torque_p95_of_stall",
+    "torque_max_of_stall",
+    "max_lag_deg",
+    "pin_force_p50_n",
+    "pin_force_p95_n",
+    "pin_force_p99_n",
+    "pin_force_max_n",
+    "loop_error_max_mm",
+    "frame_contact_share",
+)
+"""The builder's figures of a simulated trial, logged as metrics."""
+
+
+def gait_of(config: RobotConfig) -> tuple[object, dict[str, float]]:
+    """Returns the robot's gait and each slot's phase offset in degrees, from its motors'
+    names (`sim.robot.LEG_SLOTS`).
+
+    Raises:
+        ValueError: when the motors' names are not the six slots.
+    """
+    offsets = {m.name: m.phase_deg for m in config.motors}
+    if sorted(offsets) != sorted(LEG_SLOTS):
+        raise ValueError(
+            f"the robot config's motors are named {sorted(offsets)}; the simulation mounts a "
+            f"leg where its motor's name says, so name them {', '.join(LEG_SLOTS)}"
+        )
+    return config.gait, offsets
+
+
+def document_source(path: Path, experiment_id: str) -> SourceLinkage:
+    """Returns a linkage document file (`linkevo pull`'s linkage.json) as a source.
+
+    Raises:
+        ValueError: a file that is not a readable linkage document, naming it.
+    """
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+        from_document(document)
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
+        raise ValueError(f"{path}: not a linkage document ({exc})") from exc
+    meta = document.get("meta", {})
+    return SourceLinkage(
+        run_id=str(meta.get("run_id") or ""),
+        cell=meta.get("cell"),
+        experiment_id=experiment_id,
+        approach=str(meta.get("approach") or "unknown"),
+        fitness=str(meta.get("fitness") or "unknown"),
+        document=document,
+    )
+
+
+def simulate_source(
+    source: SourceLinkage,
+    floor_name: str,
+    *,
+    config: RobotConfig,
+    seconds: float,
+    repeats: int,
+    seed: int = 0,
+) -> tuple[dict, list[Walk]]:
+    """Walks the source's linkage `repeats` times on the floor and returns the summary
+    (`sim.walk.summary`, with how the leg was built) and the walks; a linkage that does
+    not turn comes back as `breaks` with no distances and no walks."""
+    genome, mode = from_document(source.document)
+    gait, offsets = gait_of(config)
+    where = floor(floor_name)
+    try:
+        leg = leg_from_genome(genome, mode)
+    except LegError as exc:
+        refused = {
+            "floor": where.name,
+            "seconds": seconds,
+            "distance_cm": [],
+            "mean_distance_cm": None,
+            "heading_drift_deg": [],
+            "breaks": True,
+            "reason": str(exc),
+            "leg": "none",
+        }
+        return refused, []
+    walks = field_trials(
+        leg,
+        where,
+        repeats=repeats,
+        seed=seed,
+        gait=gait,
+        offsets_deg=offsets,
+        settings=WalkSettings(seconds=seconds),
+    )
+    result = summary(walks, where, seconds)
+    result["leg"] = "LEGO build" if leg.built else "as evolved"
+    if leg.note:
+        result["leg_note"] = leg.note
+    return result, walks
+
+
+def write_pictures(walk: Walk, out: Path, title: str) -> list[Path]:
+    """Writes the first walk's pictures into out: walk.gif (its first 4 s), walk.png,
+    path.png and contacts.png (`workers.walk_drawings`); returns their paths.
+
+    Raises:
+        RuntimeError: when MuJoCo cannot render (no OpenGL), saying what to install.
+    """
+    from linkevo.workers import walk_drawings as draw
+
+    out.mkdir(parents=True, exist_ok=True)
+    try:
+        frames = draw.render_frames(walk, seconds=4.0, fps=12.0, size=(400, 225))
+    except Exception as exc:  # MuJoCo raises plain Exceptions when no GL context opens
+        raise RuntimeError(
+            f"MuJoCo could not render ({exc}); install Debian's libosmesa6 and set "
+            "MUJOCO_GL=osmesa, or set MUJOCO_GL=egl where a GPU driver is present"
+        ) from exc
+    return [
+        draw.write_gif(frames, out / "walk.gif", fps=12.0),
+        draw.write_still(frames[len(frames) // 2], out / "walk.png"),
+        draw.draw_body_path(walk, out / "path.png", title),
+        draw.draw_contacts(walk, out / "contacts.png"),
+    ]
+
+
+def log_simulated(
+    uri: str,
+    source: SourceLinkage,
+    robot: str,
+    result: dict,
+    seed: int,
+    pictures: list[Path] = (),
+) -> str:
+    """Logs a simulated field trial (param simulated=physics), with its pictures, and
+    returns its run id."""
+    distances = [d for d in result["distance_cm"] if d is not None]
+    metrics = {
+        name: float(result[name])
+        for name in FIGURES
+        if result.get(name) is not None and math.isfinite(result[name])
+    }
+    return log_field_trial(
+        uri,
+        source,
+        robot=robot,
+        floor=result["floor"],
+        distances=distances,
+        params={
+            "simulated": PHYSICS,
+            "seconds": str(result["seconds"]),
+            "repeats": str(len(result["distance_cm"])),
+            "seed": str(seed),
+            "leg": result.get("leg", ""),
+        },
+        metrics=metrics,
+        tags={"breaks": str(result["breaks"]), "reason": result["reason"][:5000]},
+        artifacts={"simulated_trial.json": result},
+        telemetry=list(pictures),
+    )

@@ -1,0 +1,166 @@
+"""`linkevo hexapod simulate` and `linkevo hexapod study` on a real sqlite store and the
+real engine: the JSON a user reads, the field trials logged, Table I predicted, bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+from mlflow.tracking import MlflowClient
+
+from linkevo import sim
+from linkevo.orchestrator.cli import main
+from linkevo.sim.leg import LegError, leg_from_genome
+from linkevo.sim.linkage_doc import to_document
+from linkevo.workers.artifacts import write_json_atomic, write_parquet_atomic
+from linkevo.workers.tracking import ensure_experiment
+
+GRID = "abcdef012345"
+
+
+def walkable(genomes: np.ndarray, count: int) -> list[int]:
+    """The `count` lowest-F_p rows whose linkage turns a full turn (a leg can be built)."""
+    found = []
+    loss = sim.evaluate(genomes).loss
+    for i in np.argsort(loss):
+        try:
+            leg_from_genome(genomes[i])
+        except LegError:
+            continue
+        found.append(int(i))
+        if len(found) == count:
+            return found
+    raise AssertionError("too few walkable genomes")
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """A real store with GRID: one finished MAP-LIS/Fp trial whose repertoire fills the
+    5 × 5 regions (2, 2) (its best cell), (2, 3) and (3, 3), and (0, 0) far away."""
+    root = tmp_path_factory.mktemp("walkstore")
+    uri = f"sqlite:///{root / 'mlflow.db'}"
+    experiment = ensure_experiment(uri)
+    client = MlflowClient(uri)
+    client.create_run(experiment, tags={"grid_id": GRID, "linkevo.kind": "grid"})
+    genomes = sim.random_genomes(np.random.default_rng(5), 2000)
+    rows = walkable(genomes, 4)
+    ev = sim.evaluate(genomes[rows])
+    tags = {"grid_id": GRID, "linkevo.kind": "trial", "approach": "MAP-LIS", "fitness": "Fp"}
+    run = client.create_run(experiment, tags={**tags, "trial_key": "MAP-LIS/Fp/00"})
+    run_id = run.info.run_id
+    client.log_param(run_id, "mode", "paper")
+    client.log_metric(run_id, "best_loss", 1.0)
+    folder = root / "art"
+    folder.mkdir()
+    write_json_atomic(folder / "best_linkage.json", to_document(genomes[rows[0]]))
+    bins = np.array([[50, 50], [50, 70], [70, 70], [5, 5]])
+    write_parquet_atomic(
+        folder / "repertoire.parquet",
+        {
+            "cell": bins[:, 0] * 100 + bins[:, 1],
+            "bin_0": bins[:, 0],
+            "bin_1": bins[:, 1],
+            "loss": np.array([1.0, 2.0, 3.0, 4.0]),
+            "genome": genomes[rows],
+            "foot_x": ev.foot_x.astype(np.float32),
+            "foot_y": ev.foot_y.astype(np.float32),
+        },
+    )
+    client.log_artifacts(run_id, str(folder))
+    client.set_terminated(run_id)
+    return uri, run_id, genomes[rows]
+
+
+def test_simulate_prints_the_table_one_json_and_logs_a_simulated_field_trial(store, capsys):
+    uri, run_id, _ = store
+    code = main(
+        ["hexapod", "simulate", "--linkage", run_id, "--floor", "carpet", "--seconds", "2",
+         "--repeats", "2", "--json", "--tracking-uri", uri]
+    )  # fmt: skip
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["floor"] == "carpet" and result["seconds"] == 2.0
+    assert len(result["distance_cm"]) == 2 and result["mean_distance_cm"] > 1
+    assert result["mean_distance_cm"] == pytest.approx(np.mean(result["distance_cm"]), abs=0.01)
+    for key in ("heading_drift_deg", "breaks", "reason", "torque_p95_of_stall", "pin_force_p99_n",
+                "loop_error_max_mm", "body_height_cm", "foot_slip_mm_s"):  # fmt: skip
+        assert key in result
+    run = MlflowClient(uri).get_run(result["run_id"])
+    assert run.data.params["simulated"] == "physics"
+    assert run.data.tags["linkevo.kind"] == "field_trial"
+    assert run.data.tags["source_run_id"] == run_id
+    history = MlflowClient(uri).get_metric_history(result["run_id"], "distance_cm")
+    assert [round(m.value, 2) for m in history] == result["distance_cm"]
+
+    assert main(["hexapod", "table", "--tracking-uri", uri]) == 0
+    table = capsys.readouterr().out
+    assert "predicted by the 3-D simulation" in table
+    assert f"– / {result['mean_distance_cm']:.1f} cm" in table
+
+
+def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_path, capsys):
+    _, _, genomes = store
+    doc = tmp_path / "linkage.json"
+    doc.write_text(json.dumps(to_document(genomes[1])))
+    out = tmp_path / "pics"
+    code = main(
+        ["hexapod", "simulate", "--linkage", str(doc), "--floor", "flat", "--seconds", "1",
+         "--repeats", "1", "--no-log", "--out", str(out)]
+    )  # fmt: skip
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "flat floor" in text and "distance" in text
+    for name in ("walk.gif", "walk.png", "path.png", "contacts.png"):
+        assert (out / name).stat().st_size > 1000
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--floor", "ice"], "--floor 'ice': allowed flat, carpet"),
+        (["--floor", "flat", "--seconds", "0"], "--seconds 0.0: allowed a number in (0, 600]"),
+        (["--floor", "flat", "--seconds", "nan"], "--seconds nan"),
+        (["--floor", "flat", "--repeats", "0"], "--repeats 0: allowed an integer in [1, 100]"),
+        (["--floor", "flat", "--robot", "third"], "--robot 'third': allowed first, modified"),
+    ],
+)
+def test_simulate_refuses_bad_input_before_any_work(store, args, message, capsys):
+    uri, run_id, _ = store
+    before = len(MlflowClient(uri).search_runs(["1"], max_results=1000))
+    code = main(["hexapod", "simulate", "--linkage", run_id, "--tracking-uri", uri, *args])
+    assert code != 0
+    assert message in capsys.readouterr().err
+    assert len(MlflowClient(uri).search_runs(["1"], max_results=1000)) == before
+
+
+def test_simulate_refuses_a_file_that_is_not_a_linkage(tmp_path, capsys):
+    bad = tmp_path / "notes.json"
+    bad.write_text('{"hello": 1}')
+    code = main(["hexapod", "simulate", "--linkage", str(bad), "--floor", "flat", "--no-log"])
+    assert code != 0
+    assert f"{bad}: not a linkage document" in capsys.readouterr().err
+
+
+def test_study_predicts_first_and_modified_robots_from_the_5x5_map(store, tmp_path, capsys):
+    uri, run_id, _ = store
+    out = tmp_path / "table1.csv"
+    code = main(
+        ["hexapod", "study", GRID, "--seconds", "1", "--repeats", "1", "--out", str(out),
+         "--tracking-uri", uri]
+    )  # fmt: skip
+    assert code == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [(r["approach"], r["robot"], r["floor"]) for r in rows] == [
+        ("MAP-LIS", "first", "flat"),
+        ("MAP-LIS", "first", "carpet"),
+        ("MAP-LIS", "modified", "flat"),
+        ("MAP-LIS", "modified", "carpet"),
+    ]
+    first, modified = rows[0], rows[2]
+    assert first["region"] == "2,2" and first["cell"] == "best"
+    assert modified["region"] in ("2,3", "3,3")  # a neighbour of the first's region
+    assert all(r["source_run_id"] == run_id for r in rows)
+    assert all(r["field_trial_run_id"] for r in rows)
+    assert "candidate cell" in capsys.readouterr().out

@@ -1,0 +1,125 @@
+"""The 3-D walk on the real engine (MuJoCo): convergence, determinism, loop closure, the
+kinematic bound, and the directions the docs predict (docs/walking.md)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from linkevo.sim.evaluate import evaluate
+from linkevo.sim.genome import random_genomes
+from linkevo.sim.leg import LegError, leg_from_genome
+from linkevo.sim.robot import FLOORS, Frame, Motor
+from linkevo.sim.walk import LOOP_ERROR_BOUND_MM, WalkSettings, walk
+from tests.helpers.walking import crank_leg, jansen_leg
+
+SHORT = WalkSettings(seconds=4.0)
+GRIPPY = dataclasses.replace(FLOORS["flat"], name="grippy", friction=1.5)
+SLIPPERY = dataclasses.replace(FLOORS["flat"], name="slippery", friction=0.08)
+SOFT = dataclasses.replace(FLOORS["flat"], name="soft", solref=(0.03, 1.0), solimp=(0.3, 0.9, 0.01))
+
+
+@pytest.fixture(scope="module")
+def jansen():
+    return jansen_leg()
+
+
+@pytest.fixture(scope="module")
+def evolved():
+    """The best-F_p linkage of 3,000 random genomes that turns a full turn: a leg from the
+    genome path (LEGO build, layers, rigid parts) as `linkevo pull` builds it."""
+    genomes = random_genomes(np.random.default_rng(7), 3000)
+    loss = evaluate(genomes, "Fp", "paper").loss
+    for i in np.argsort(loss):
+        try:
+            return leg_from_genome(genomes[i])
+        except LegError:
+            continue
+    raise AssertionError("no random genome turns a full turn")
+
+
+def test_halving_the_timestep_changes_the_distance_by_less_than_5_percent(jansen, evolved):
+    for leg in (jansen, evolved):
+        coarse = walk(leg, FLOORS["carpet"], settings=SHORT)
+        fine = walk(leg, FLOORS["carpet"], settings=dataclasses.replace(SHORT, timestep=0.0005))
+        assert abs(coarse.distance_m) > 0.05
+        assert abs(coarse.distance_m - fine.distance_m) < 0.05 * abs(fine.distance_m)
+
+
+def test_the_same_seed_gives_the_same_distance_and_another_seed_another(evolved):
+    first = walk(evolved, FLOORS["flat"], settings=SHORT, seed=3)
+    again = walk(evolved, FLOORS["flat"], settings=SHORT, seed=3)
+    other = walk(evolved, FLOORS["flat"], settings=SHORT, seed=4)
+    assert first.distance_m == again.distance_m
+    assert first.heading_drift_deg == again.heading_drift_deg
+    assert other.distance_m != first.distance_m
+
+
+@pytest.mark.parametrize("floor", ["flat", "carpet"])
+def test_loops_stay_closed_and_no_walk_beats_the_no_slip_bound(jansen, evolved, floor):
+    for leg in (jansen, evolved):
+        w = walk(leg, FLOORS[floor], settings=SHORT)
+        assert 0 < w.loop_error_mm < LOOP_ERROR_BOUND_MM
+        assert 0 < w.distance_m <= w.bound_m
+
+
+def test_a_grippy_floor_cannot_push_a_walk_past_the_bound(evolved):
+    w = walk(evolved, GRIPPY, settings=SHORT)
+    assert 0 < w.distance_m <= w.bound_m
+
+
+def test_a_leg_whose_foot_never_reaches_the_floor_goes_nowhere():
+    frame = Frame()
+    short = crank_leg(length=1.5)  # 12 mm + a beam's half width, inside the 25 mm half-height
+    assert short.paths[:, :, 1].min() * 8 + 3.6 < frame.height / 2 * 1000
+    w = walk(short, FLOORS["flat"], settings=SHORT)
+    assert abs(w.distance_m) < 0.002
+    assert w.breaks and "frame drags" in w.reason
+
+
+def test_cranks_turned_backwards_walk_backwards(jansen):
+    forward = walk(jansen, FLOORS["flat"], settings=SHORT)
+    backward = walk(jansen, FLOORS["flat"], settings=dataclasses.replace(SHORT, reverse=True))
+    assert forward.distance_m > 0.1
+    assert backward.distance_m < -0.5 * forward.distance_m
+
+
+def test_more_friction_means_less_slip_and_a_flat_stance_walks_further(jansen, evolved):
+    for leg in (jansen, evolved):
+        slippery = walk(leg, SLIPPERY, settings=SHORT)
+        grippy = walk(leg, GRIPPY, settings=SHORT)
+        assert grippy.foot_slip_mm_s < slippery.foot_slip_mm_s
+    # A flat stance moves every down foot alike, so grip only removes slip (docs/walking.md)
+    assert (
+        walk(jansen, GRIPPY, settings=SHORT).distance_m
+        > walk(jansen, SLIPPERY, settings=SHORT).distance_m
+    )
+
+
+def test_a_softer_floor_walks_less_far_and_the_feet_sink_in(jansen, evolved):
+    for leg in (jansen, evolved):
+        stiff = walk(leg, FLOORS["flat"], settings=SHORT)
+        soft = walk(leg, SOFT, settings=SHORT)
+        assert soft.distance_m < stiff.distance_m
+        assert soft.body_height_m < stiff.body_height_m
+
+
+def test_a_flat_stance_walks_close_to_its_kinematic_bound(jansen):
+    w = walk(jansen, GRIPPY, settings=SHORT)
+    assert 0.9 * w.bound_m <= w.distance_m <= w.bound_m
+    assert not w.breaks
+
+
+def test_a_motor_too_weak_for_the_robot_stalls_and_the_walk_breaks(evolved):
+    weak = walk(evolved, FLOORS["flat"], settings=SHORT, motor=Motor(stall_nm=0.02))
+    assert weak.breaks and "motor stalls" in weak.reason
+    assert weak.max_lag_deg > 45
+    assert not walk(evolved, FLOORS["flat"], settings=SHORT).breaks
+
+
+def test_a_frame_too_heavy_for_lego_pins_breaks_on_pin_loads(jansen):
+    heavy = walk(jansen, FLOORS["flat"], settings=SHORT, frame=Frame(mass_kg=40.0))
+    assert heavy.pin_force_n[2] > 60.0
+    assert heavy.breaks and "pin loads" in heavy.reason
