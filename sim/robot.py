@@ -76,7 +76,8 @@ class Frame:
 class Floor:
     """A floor's contact: its friction coefficient (it wins over the beams': the floor has
     the higher `priority`) and MuJoCo's solref (time constant s, damping ratio) and solimp,
-    which set how far a foot sinks in."""
+    which set how far a foot sinks in (a time constant below twice the physics step is
+    raised to it)."""
 
     name: str
     friction: float
@@ -89,7 +90,7 @@ FLOORS = {
     "flat": Floor(
         "flat",
         friction=0.35,
-        solref=(0.002, 1.0),
+        solref=(0.004, 1.0),
         solimp=(0.95, 0.99, 0.001),
         summary="flat and slightly slippery: plastic on a smooth floor, stiff contact",
     ),

@@ -34,6 +34,8 @@ carry it."""
 PIN_FORCE_LIMIT_N = 60.0
 """The 99th-percentile pin force above which a LEGO Technic pin joint is taken to fail
 (beams spread and the pin walks out); an estimate, see docs/walking.md."""
+MIN_TIMESTEP_S = 0.0005
+"""A walk that diverges is walked again at half the step, down to this one."""
 LOOP_ERROR_BOUND_MM = 2.0
 """The loop-closure error a walk stays below at the default step (the tests hold it)."""
 START_JITTER = {"heading_deg": 3.0, "position_mm": 5.0, "phase_deg": 3}
@@ -48,6 +50,7 @@ class WalkSettings:
         settle_s: time on the floor with the legs held, before the clock starts.
         timestep: physics step (s).
         motor_dt: the motor firmware's velocity-loop period (s), a multiple of timestep.
+        loads_every: record pin loads and loop closure every this many control ticks.
         reverse: turn the cranks backwards (the gait's speed negated).
     """
 
@@ -55,6 +58,7 @@ class WalkSettings:
     settle_s: float = 0.5
     timestep: float = TIMESTEP_S
     motor_dt: float = 0.002
+    loads_every: int = 2
     reverse: bool = False
 
 
@@ -78,6 +82,8 @@ class Walk:
         loop_error_mm: the largest loop-closure error.
         frame_contact: share of the walk the frame touched the floor.
         breaks: the robot cannot walk as built; reason says why ("" when it walks).
+        timestep: the physics step the walk ran at (a diverging walk is retried finer).
+        diverged: the simulation blew up even at the finest step.
         trace: per control tick: "t" (T,), "body" (T, 3) frame position, "contact"
             (T, 6) bool each leg touching the floor, "phase" (T, 6) radians, "qpos"
             (T, nq) the whole state's positions (to replay the walk).
@@ -102,6 +108,8 @@ class Walk:
     breaks: bool
     reason: str
     trace: dict[str, np.ndarray] = field(repr=False)
+    timestep: float = TIMESTEP_S
+    diverged: bool = False
     model: mujoco.MjModel | None = field(default=None, repr=False)
 
 
@@ -143,12 +151,17 @@ def walk(
         shift = rng.uniform(-1, 1, 2) * START_JITTER["position_mm"] / 1000
         top = START_JITTER["phase_deg"]
         jitter = np.radians(rng.integers(-top, top + 1, 6))
-    start = offsets + jitter
-    robot = build_robot(
-        legs, dict(zip(LEG_SLOTS, start, strict=True)), floor, frame=frame, motor=motor,
-        timestep=settings.timestep,
-    )  # fmt: skip
-    return _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
+    start = dict(zip(LEG_SLOTS, offsets + jitter, strict=True))
+    while True:
+        robot = build_robot(
+            legs, start, floor, frame=frame, motor=motor, timestep=settings.timestep
+        )
+        result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
+        finer = settings.timestep / 2
+        if not result.diverged or finer < MIN_TIMESTEP_S - 1e-12:
+            return result
+        # A stiff linkage can blow up at the default step: walk it again at half the step.
+        settings = dataclasses.replace(settings, timestep=finer)
 
 
 class _Run:
@@ -175,8 +188,7 @@ class _Run:
                 if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b).startswith(f"{slot}/"):
                     body_leg[b] = i
         self.geom_leg = body_leg[m.geom_bodyid]
-        rows = np.flatnonzero(np.isin(np.arange(m.neq), robot.loop_pins))
-        self.n_loops = len(rows)
+        self.n_loops = len(robot.loop_pins)
 
     def run(self, yaw: float, shift: np.ndarray) -> Walk:
         m, d, robot = self.robot.model, self.data, self.robot
@@ -195,10 +207,10 @@ class _Run:
         n_ticks = round(self.settings.seconds * self.gait.rate_hz)
         rec = {k: [] for k in ("t", "body", "mat", "lag", "torque", "sat", "feet", "contact")}
         rec |= {"frame": [], "pins": [], "loops": [], "phase": [], "qpos": []}
-        for _ in range(n_ticks):
+        for tick in range(n_ticks):
             if not self._tick(pid):
                 return self._diverged()
-            self._record(rec, pid)
+            self._record(rec, pid, loads=tick % self.settings.loads_every == 0)
         return self._result(rec, p0, yaw0)
 
     def phases(self) -> np.ndarray:
@@ -217,7 +229,7 @@ class _Run:
             mujoco.mj_step(m, d, nstep=self.motor_steps)
         return bool(np.isfinite(d.qpos).all()) and abs(d.qpos[2]) < 10.0
 
-    def _record(self, rec: dict, pid: PhasePid) -> None:
+    def _record(self, rec: dict, pid: PhasePid, loads: bool) -> None:
         m, d, robot = self.robot.model, self.data, self.robot
         rec["t"].append(d.time)
         rec["body"].append(d.xpos[robot.frame_body].copy())
@@ -232,13 +244,17 @@ class _Run:
         touching = geoms.ravel()
         rec["frame"].append(bool((touching == robot.frame_geom).any()))
         legs = self.geom_leg[touching]
-        rec["contact"].append(np.isin(np.arange(6), legs[legs >= 0]))
+        contact = np.zeros(6, dtype=bool)
+        contact[legs[legs >= 0]] = True
+        rec["contact"].append(contact)
+        if not loads:
+            return
         mujoco.mj_rnePostConstraint(m, d)
         tree = np.linalg.norm(d.cfrc_int[robot.leg_bodies, 3:], axis=1)
-        rows = np.flatnonzero(d.efc_type[: d.nefc] == mujoco.mjtConstraint.mjCNSTR_EQUALITY)
-        loops = np.linalg.norm(d.efc_force[rows].reshape(-1, 3), axis=1)
+        rows = 3 * self.n_loops  # equality rows come first in the constraint arrays
+        loops = np.linalg.norm(d.efc_force[:rows].reshape(-1, 3), axis=1)
         rec["pins"].append(np.concatenate([tree, loops]))
-        rec["loops"].append(np.linalg.norm(d.efc_pos[rows].reshape(-1, 3), axis=1))
+        rec["loops"].append(np.linalg.norm(d.efc_pos[:rows].reshape(-1, 3), axis=1))
 
     def _result(self, rec: dict, p0: np.ndarray, yaw0: float) -> Walk:
         body, mats = np.array(rec["body"]), np.array(rec["mat"]).reshape(-1, 3, 3)
@@ -284,6 +300,7 @@ class _Run:
                 "qpos": np.array(rec["qpos"]),
             },
             model=self.robot.model,
+            timestep=self.settings.timestep,
         )
         reason = break_reason(walk, lag)
         return dataclasses.replace(walk, breaks=bool(reason), reason=reason)
@@ -296,6 +313,8 @@ class _Run:
             "the simulation diverged (a loop flew apart): the linkage cannot be assembled "
             "as a rigid LEGO build",
             {},
+            timestep=self.settings.timestep,
+            diverged=True,
         )  # fmt: skip
 
 
@@ -381,6 +400,7 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "pin_force_p99_n": _round(worst(w.pin_force_n[2] for w in walks)),
         "pin_force_max_n": _round(worst(w.pin_force_n[3] for w in walks)),
         "loop_error_max_mm": _round(worst(w.loop_error_mm for w in walks), 3),
+        "timestep_ms": [round(w.timestep * 1000, 3) for w in walks],
         "frame_contact_share": _round(worst(w.frame_contact for w in walks), 3),
     }  # fmt: skip
 
@@ -404,5 +424,6 @@ def _foot_slip(feet: np.ndarray, t: np.ndarray) -> float:
         return math.nan
     down = feet[:, :, 2] <= feet[:, :, 2].min(axis=0) + 0.003
     both = down[1:] & down[:-1]
-    step = np.linalg.norm(np.diff(feet[:, :, :2], axis=0), axis=2) / np.diff(t)[:, None]
+    dt = np.diff(t)[:, None]
+    step = np.linalg.norm(np.diff(feet[:, :, :2], axis=0), axis=2) / np.where(dt > 0, dt, np.inf)
     return float(step[both].mean() * 1000) if both.any() else math.nan

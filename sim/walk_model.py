@@ -6,9 +6,10 @@ extensions), a hinge per pin, the crank's hinge driven by the leg's motor; every
 closes a loop as one `connect` equality placed at the assembled pose, so the loops start
 closed. The linkage's plane is the robot's side plane, its y axis up, mounted facing the
 way its stance pushes the robot (`Leg.facing`: a builder turns a leg round that would walk
-the robot backwards), and each beam sits `layer` pitches outside the frame. A right-side leg is the mirror
-image of a left-side one, so in its own frame every leg turns the same way. Only beams
-and the frame touch the floor; beams pass through each other (they are on layers).
+the robot backwards), and each beam sits `layer` pitches outside the frame. A right-side
+leg is the mirror image of a left-side one, so in its own frame every leg turns the same
+way. Only beams and the frame touch the floor; beams pass through each other (they are on
+layers).
 """
 
 from __future__ import annotations
@@ -30,8 +31,10 @@ from linkevo.sim.robot import (
     Motor,
 )
 
-TIMESTEP_S = 0.001
-"""Physics step: at 2 ms loops open by millimetres and walked distances are off by 2x."""
+TIMESTEP_S = 0.002
+"""Physics step. Walked distances at 2 ms agree with 1 ms and 0.5 ms within 1 % and loops
+stay closed within 1 mm (tests/sim/test_walk.py, docs/walking.md); equality and contact
+time constants are kept at twice the step or more."""
 PIN_DAMPING = 1e-4
 """Viscous friction of a LEGO pin, N·m per rad/s (an estimate; it only damps rattling)."""
 _HINGE = mujoco.mjtJoint.mjJNT_HINGE
@@ -119,7 +122,7 @@ def build_robot(
         priority=1,
         condim=3,
         friction=[floor.friction, 0.005, 0.0001],
-        solref=list(floor.solref),
+        solref=[max(floor.solref[0], 2 * timestep), floor.solref[1]],
         solimp=[*floor.solimp, 0.5, 2.0],
     )
     body = world.add_body(name="frame")
@@ -132,7 +135,7 @@ def build_robot(
         rgba=[0.2, 0.25, 0.3, 1],
         **_LEG_CONTACT,
     )
-    builders = [_LegBuilder(spec, body, s, legs[s], phases[s], frame) for s in LEG_SLOTS]
+    builders = [_LegBuilder(spec, body, s, legs[s], phases[s], frame, timestep) for s in LEG_SLOTS]
     for leg in builders:
         leg.add_actuator(spec, motor)
     lowest = min(leg.lowest for leg in builders)
@@ -179,9 +182,17 @@ class _LegBuilder:
     """Adds one leg's bodies, hinges, loop closures and foot site to the frame."""
 
     def __init__(
-        self, spec: mujoco.MjSpec, frame_body, slot: str, leg: Leg, phase: float, frame: Frame
+        self,
+        spec: mujoco.MjSpec,
+        frame_body,
+        slot: str,
+        leg: Leg,
+        phase: float,
+        frame: Frame,
+        timestep: float,
     ) -> None:
         self.slot = slot
+        self._timestep = timestep
         side = 1.0 if slot.startswith("left") else -1.0
         along = {"front": 1.0, "middle": 0.0, "rear": -1.0}[slot.split("-")[1]]
         self._axle = np.array([along * frame.leg_spacing, side * frame.width / 2, 0.0])
@@ -276,7 +287,7 @@ class _LegBuilder:
             name1=child.name,
             name2=other_body.name,
             data=[*anchor] + [0.0] * 9,
-            solref=[2 * TIMESTEP_S, 1.0],
+            solref=[2 * self._timestep, 1.0],
         )
         self.pin_names.append(name)
 
