@@ -388,6 +388,7 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "bound_cm": None if mean(w.bound_m for w in walks) is None
         else round(mean(w.bound_m for w in walks) * 100, 2),
         "heading_drift_deg": [round(w.heading_drift_deg, 2) for w in walks],
+        "beyond_bound": any(w.distance_m > w.bound_m for w in walks if math.isfinite(w.distance_m)),
         "breaks": any(w.breaks for w in walks),
         "reason": "; ".join(reasons),
         "body_height_cm": _round(mean(w.body_height_m * 100 for w in walks)),

@@ -365,6 +365,11 @@ def _simulation_text(source, robot: str, result: dict) -> str:
             f"{result['pin_force_p50_n']}/{result['pin_force_p95_n']}/"
             f"{result['pin_force_p99_n']} N; loop closure within {result['loop_error_max_mm']} mm"
         )
+    if result.get("beyond_bound"):
+        lines.append(
+            "  beyond the no-slip bound, which holds for a level body: the robot rocks "
+            f"(pitch up to {result['max_pitch_deg']}°) and its feet slip; trust the distance less"
+        )
     verdict = f"BREAKS: {result['reason']}" if result["breaks"] else "walks"
     lines.append(f"  {verdict}")
     if "run_id" in result:
