@@ -379,7 +379,8 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         return statistics.fmean(finite) if finite else None
 
     distances = [w.distance_m * 100 for w in walks]
-    reasons = list(dict.fromkeys(w.reason for w in walks if w.reason))
+    broken = [w.reason for w in walks if w.breaks]
+    reason = f"{broken[0]} ({len(broken)} of {len(walks)} walks break)" if broken else ""
     return {
         "floor": floor.name,
         "seconds": seconds,
@@ -390,7 +391,7 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "heading_drift_deg": [round(w.heading_drift_deg, 2) for w in walks],
         "beyond_bound": any(w.distance_m > w.bound_m for w in walks if math.isfinite(w.distance_m)),
         "breaks": any(w.breaks for w in walks),
-        "reason": "; ".join(reasons),
+        "reason": reason,
         "body_height_cm": _round(mean(w.body_height_m * 100 for w in walks)),
         "min_clearance_cm": _round(-worst(-w.clearance_m * 100 for w in walks)
                                    if worst(-w.clearance_m * 100 for w in walks) is not None
