@@ -11,9 +11,11 @@ within ±5 mm, each leg's phase within the alignment tolerance (±3°).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 import statistics
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import mujoco
@@ -157,12 +159,27 @@ def walk(
         robot = build_robot(
             legs, start, floor, frame=frame, motor=motor, timestep=settings.timestep
         )
-        result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
+        with _quiet_engine():
+            result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
         finer = settings.timestep / 2
         if not result.diverged or finer < MIN_TIMESTEP_S - 1e-12:
             return result
         # A stiff linkage can blow up at the default step: walk it again at half the step.
         settings = dataclasses.replace(settings, timestep=finer)
+
+
+@contextlib.contextmanager
+def _quiet_engine() -> Iterator[None]:
+    """Keeps MuJoCo's warnings out of `MUJOCO_LOG.TXT` in the user's working directory.
+
+    A walk reads the engine's warnings off `MjData.warning` (see `_Run._tick`) instead.
+    """
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda _message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
 
 
 class _Run:
