@@ -2,15 +2,7 @@
 
 from linkevo.algorithms.archive import GridArchive, elite_rows
 from linkevo.algorithms.ea import EvolutionaryAlgorithm
-from linkevo.algorithms.factory import (
-    APPROACHES,
-    MAP_ELITES,
-    MULTI_OBJECTIVE,
-    REPERTOIRE_APPROACHES,
-    STUDY_APPROACHES,
-    eval_fitness,
-    make_optimizer,
-)
+from linkevo.algorithms.factory import eval_fitness, make_optimizer
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.map_elites import MapElites
 from linkevo.algorithms.mutation import bounce_back, initial_sigma, mutate
@@ -27,23 +19,14 @@ from linkevo.algorithms.random_sampling import RandomSampling
 from linkevo.algorithms.scoring import (
     HV_REFERENCES,
     QD_OFFSETS,
-    SINGLE_FITNESSES,
-    TWO_OBJECTIVE,
     scalar_loss,
 )
 from linkevo.algorithms.selection import tournament
 
 __all__ = [
-    "APPROACHES",
     "HV_REFERENCES",
-    "MAP_ELITES",
-    "MULTI_OBJECTIVE",
     "NSGA2",
     "QD_OFFSETS",
-    "REPERTOIRE_APPROACHES",
-    "SINGLE_FITNESSES",
-    "STUDY_APPROACHES",
-    "TWO_OBJECTIVE",
     "BaseOptimizer",
     "EvolutionaryAlgorithm",
     "GridArchive",

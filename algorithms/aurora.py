@@ -13,6 +13,7 @@ from linkevo.algorithms.aurora_paths import check_representation, prepare_paths,
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.map_elites import MapElites
 from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.study import DEFAULT_ANGLES
 
 DEVICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 """Where the autoencoder trains: "auto" takes a GPU when torch sees one, else the CPU."""
@@ -123,7 +124,7 @@ class AuroraMapElites(MapElites):
         batch_size: int,
         mode: str,
         seed: int,
-        n_angles: int = 40,
+        n_angles: int = DEFAULT_ANGLES,
         initial_sigma: float | None = None,
         **options: object,
     ) -> None:

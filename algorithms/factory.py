@@ -7,18 +7,8 @@ from linkevo.algorithms.map_elites import MapElites
 from linkevo.algorithms.nsga2 import NSGA2
 from linkevo.algorithms.optimizer import Optimizer
 from linkevo.algorithms.random_sampling import RandomSampling
-from linkevo.algorithms.scoring import evaluated_fitness
+from linkevo.sim.study import APPROACHES, DEFAULT_ANGLES, MULTI_OBJECTIVE, evaluated_fitness
 
-MAP_ELITES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
-"""The MAP-Elites approaches of the study (each with its own descriptor grid)."""
-STUDY_APPROACHES: tuple[str, ...] = ("EA", "NSGA2", *MAP_ELITES)
-"""The study's six approaches."""
-APPROACHES: tuple[str, ...] = (*STUDY_APPROACHES, "RANDOM")
-"""Every approach `make_optimizer` builds: the study's six and the RANDOM baseline."""
-REPERTOIRE_APPROACHES: tuple[str, ...] = (*MAP_ELITES, "RANDOM")
-"""Approaches that keep a repertoire (an archive on a grid) rather than a population."""
-MULTI_OBJECTIVE: tuple[str, ...] = ("NSGA2",)
-"""Approaches that optimise the two-objective variant of their fitness."""
 _OPTIONS: dict[str, tuple[str, ...]] = {
     "EA": ("coverage_space", "initial_sigma"),
     "NSGA2": ("coverage_space", "initial_sigma"),
@@ -41,7 +31,7 @@ def make_optimizer(
     batch_size: int,
     mode: str,
     seed: int,
-    n_angles: int = 40,
+    n_angles: int = DEFAULT_ANGLES,
     **options: object,
 ) -> Optimizer:
     """Returns a fresh optimizer for `approach`.

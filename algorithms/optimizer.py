@@ -10,9 +10,10 @@ import numpy as np
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.mutation import initial_sigma, mutate, n_sigmas
 from linkevo.algorithms.rng_state import decode_rng, encode_rng
-from linkevo.algorithms.scoring import QD_OFFSETS, SINGLE_FITNESSES, evaluated_fitness, scalar_loss
+from linkevo.algorithms.scoring import QD_OFFSETS, scalar_loss
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import random_genomes
+from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES, evaluated_fitness
 
 
 class Optimizer(Protocol):
@@ -99,7 +100,7 @@ class BaseOptimizer:
         batch_size: int,
         mode: str,
         seed: int,
-        n_angles: int = 40,
+        n_angles: int = DEFAULT_ANGLES,
         initial_sigma: float | None = None,
     ) -> None:
         if fitness not in SINGLE_FITNESSES:

@@ -14,16 +14,6 @@ approach so scores compare.
 HV_REFERENCES: dict[str, tuple[float, float]] = {"Fp2": (600.0, 600.0), "Fsl2": (200.0, 200.0)}
 """NSGA-II hypervolume reference point per two-objective fitness (above the worst random
 losses: Fp2 (330, 273) paper / (516, 435) legacy; Fsl2 (39, 39) / (184, 130))."""
-TWO_OBJECTIVE: dict[str, str] = {"Fp": "Fp2", "Fsl": "Fsl2"}
-"""The two-objective variant NSGA-II evaluates for each fitness."""
-SINGLE_FITNESSES: tuple[str, ...] = tuple(TWO_OBJECTIVE)
-"""The fitness functions a trial optimises ("Fp", "Fsl")."""
-
-
-def evaluated_fitness(fitness: str, multi_objective: bool) -> str:
-    """Returns the `sim.evaluate` fitness behind `fitness`: its two-objective variant for a
-    multi-objective optimizer (NSGA-II), else itself."""
-    return TWO_OBJECTIVE[fitness] if multi_objective else fitness
 
 
 def coverage(filled: int, n_cells: int) -> float:

@@ -5,7 +5,7 @@ whole batch fits in the evaluation budget (as `workers.trial.run_trial` does), t
 times, on the trial's last training set (same paths, batch size, learning rate and batch
 order), the compiled CPU loop the trial used, the hand-written torch loop (the GPU path,
 and the CPU loop before the compiled one) and the plain torch.nn + autograd + torch.optim
-loop (`algorithms.aurora_reference`).
+loop (`tests/helpers/aurora_reference.py`, the tests' oracle).
 
     .venv/bin/python benchmarks/aurora_trial.py                      # the paper's schedule
     .venv/bin/python benchmarks/aurora_trial.py --initial-epochs 300 --retrain-epochs 100
@@ -15,8 +15,10 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from dataclasses import fields
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -24,9 +26,11 @@ import torch
 from linkevo.algorithms.aurora import AuroraMapElites, AuroraSettings
 from linkevo.algorithms.aurora_model import PathAutoencoder
 from linkevo.algorithms.aurora_paths import valid_rows
-from linkevo.algorithms.aurora_reference import reference_module, train_reference
-from linkevo.orchestrator.config import STUDY_EVALUATIONS
 from linkevo.sim import evaluate, random_genomes
+from linkevo.sim.study import STUDY_EVALUATIONS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # the tests' oracle
+from tests.helpers.aurora_reference import reference_module, train_reference
 
 
 def parse_args() -> argparse.Namespace:

@@ -45,8 +45,9 @@ from linkevo.orchestrator import config  # noqa: E402
 from linkevo.orchestrator.driver import trial_specs  # noqa: E402
 from linkevo.orchestrator.grid import Grid  # noqa: E402
 from linkevo.orchestrator.local_cluster import ClusterSettings, down, up  # noqa: E402
+from linkevo.workers.run_layout import trial_runs  # noqa: E402
 from linkevo.workers.tracking import ensure_experiment  # noqa: E402
-from linkevo.workers.trial_task import TrialJob, run_trial_job, trial_runs  # noqa: E402
+from linkevo.workers.trial_task import TrialJob, run_trial_job  # noqa: E402
 
 TINY = {
     "approaches": ["EA", "RANDOM"],

@@ -30,9 +30,9 @@ import numpy as np
 from deap import base, creator, tools
 
 from linkevo.algorithms import GridArchive, Individuals, select_nsga2
-from linkevo.orchestrator.config import STUDY_EVALUATIONS
 from linkevo.sim import DESCRIPTOR_SPACES, evaluate, random_genomes
 from linkevo.sim.reference import evaluate_reference
+from linkevo.sim.study import STUDY_EVALUATIONS
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.trial import TrialSpec, run_trial

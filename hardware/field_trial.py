@@ -19,15 +19,14 @@ import numpy as np
 
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.session import run_walk
+from linkevo.sim.study import MAP_ELITES
+from linkevo.workers import run_layout as layout
 from linkevo.workers.linkages import SourceLinkage
 from linkevo.workers.tracking import ensure_experiment
 
-KIND_TAG = "linkevo.kind"
-KIND = "field_trial"
 ROBOTS = ("first", "modified")
 REAL, EMULATOR, PHYSICS = "False", "True", "physics"
 """The values of a field trial's `simulated` param."""
-STUDY_APPROACHES = ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU")
 """Row order of the study's Table I; other approaches follow alphabetically."""
 
 
@@ -85,11 +84,11 @@ def log_field_trial(
     client = MlflowClient(tracking_uri=uri)
     experiment_id = ensure_experiment(uri, client.get_experiment(source.experiment_id).name)
     tags = {
-        KIND_TAG: KIND,
+        layout.KIND: layout.FIELD_TRIAL,
         "source_run_id": source.run_id,
         "source_cell": "best" if source.cell is None else str(source.cell),
-        "approach": source.approach,
-        "fitness": source.fitness,
+        layout.APPROACH: source.approach,
+        layout.FITNESS: source.fitness,
         "robot": robot,
         "floor": floor,
         **(tags or {}),
@@ -174,11 +173,11 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
     found = client.get_experiment_by_name(experiment)
     if found is None:
         raise FieldTrialError(f"--experiment {experiment!r} does not exist in {uri}")
-    runs = client.search_runs(
+    runs = layout.search(
+        client,
         [found.experiment_id],
-        filter_string=f"tags.`{KIND_TAG}` = '{KIND}'",
+        layout.where(layout.FIELD_TRIAL),
         order_by=["attributes.start_time ASC"],
-        max_results=10_000,
     )
     shown_kind = EMULATOR if simulated else REAL
     distances: dict[tuple[str, str, str], list[float]] = {}
@@ -204,8 +203,8 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
         else:
             distances.setdefault(key, []).extend(history)
     present = {key[0] for key in [*distances, *predicted]}
-    approaches = tuple(a for a in STUDY_APPROACHES if a in present) + tuple(
-        sorted(present - set(STUDY_APPROACHES))
+    approaches = tuple(a for a in MAP_ELITES if a in present) + tuple(
+        sorted(present - set(MAP_ELITES))
     )
     guesses: dict[tuple[str, str, str], float | str] = {
         k: statistics.fmean(v) for k, v in predicted.items() if v

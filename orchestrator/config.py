@@ -8,17 +8,21 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from linkevo.algorithms.factory import APPROACHES, STUDY_APPROACHES
-from linkevo.algorithms.scoring import SINGLE_FITNESSES
 from linkevo.orchestrator.cli import CliError
-from linkevo.sim.evaluation import MODES
+from linkevo.sim.study import (
+    APPROACHES,
+    DEFAULT_ANGLES,
+    DEFAULT_BATCH,
+    MIN_ANGLES,
+    MODES,
+    SINGLE_FITNESSES,
+    STUDY_APPROACHES,
+    STUDY_EVALUATIONS,
+    TARGETS,
+)
 
-STUDY_EVALUATIONS = 726_750
-"""Evaluations per trial in the study (one hour on 16 CPUs, spec §6); whole batches of
-5,000 make it 725,000."""
 STUDY_TRIALS = 10
 """Trials per approach and fitness in the study."""
-TARGETS: tuple[str, ...] = ("D16", "D24")
 """The named F_p targets a grid may use."""
 EXECUTION_KEYS: frozenset[str] = frozenset(
     {
@@ -48,7 +52,7 @@ class GridConfig:
         trials: trials per (approach, fitness) cell, >= 1.
         approaches: search approaches, a subset of `APPROACHES` (default: the study's six,
             without the RANDOM baseline).
-        fitnesses: fitness functions the trials optimise, a subset of ("Fp", "Fsl").
+        fitnesses: fitness functions the trials optimise, a subset of `sim.study.SINGLE_FITNESSES`.
         evaluations: evaluation budget per trial, >= 1.
         batch_size: children per iteration (and the initial population), >= 1.
         mode: "paper" or "legacy".
@@ -75,13 +79,13 @@ class GridConfig:
 
     trials: int = STUDY_TRIALS
     approaches: tuple[str, ...] = STUDY_APPROACHES
-    fitnesses: tuple[str, ...] = ("Fp", "Fsl")
+    fitnesses: tuple[str, ...] = SINGLE_FITNESSES
     evaluations: int = STUDY_EVALUATIONS
-    batch_size: int = 5000
+    batch_size: int = DEFAULT_BATCH
     mode: str = "paper"
     seed: int = 0
     target: str = "D16"
-    n_angles: int = 40
+    n_angles: int = DEFAULT_ANGLES
     max_seconds: float | None = None
     options: dict[str, Any] = field(default_factory=dict)
     evaluators_per_trial: int = 0
@@ -150,7 +154,7 @@ def _check_choices(cfg: GridConfig, key: str, allowed: tuple[str, ...], many: bo
 def _validate(cfg: GridConfig) -> None:
     for key in ("trials", "evaluations", "batch_size", "checkpoint_every"):
         _check_int(cfg, key, 1)
-    _check_int(cfg, "n_angles", 3)
+    _check_int(cfg, "n_angles", MIN_ANGLES)
     for key in ("seed", "max_concurrent_trials", "max_retries", "evaluators_per_trial"):
         _check_int(cfg, key, 0)
     _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)

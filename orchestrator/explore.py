@@ -29,7 +29,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.algorithms.factory import REPERTOIRE_APPROACHES
 from linkevo.orchestrator.pull import own_modules
 from linkevo.orchestrator.report.load import in_study_order, latest_per_trial, search_trial_runs
 from linkevo.sim import decode, simulate
@@ -37,6 +36,8 @@ from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from linkevo.sim.study import DEFAULT_ANGLES, REPERTOIRE_APPROACHES
+from linkevo.workers import run_layout as layout
 from linkevo.workers.artifacts import write_bytes_atomic
 
 PAGE_ARTIFACT = "explorer.html"
@@ -203,7 +204,7 @@ def trial_run(client, run_id: str) -> TrialRun:
     except MlflowException as exc:
         raise ExploreError(f"{run_id!r} is neither a trial run nor a grid id here") from exc
     tags, params = run.data.tags, run.data.params
-    approach = tags.get("approach", "unknown")
+    approach = tags.get(layout.APPROACH, "unknown")
     if approach not in REPERTOIRE_APPROACHES:
         raise ExploreError(
             f"run {run_id} is a {approach} trial, which keeps a population, not a repertoire; "
@@ -211,11 +212,11 @@ def trial_run(client, run_id: str) -> TrialRun:
         )
     return TrialRun(
         run_id=run_id,
-        trial_key=tags.get("trial_key", run_id),
+        trial_key=tags.get(layout.TRIAL_KEY, run_id),
         approach=approach,
-        fitness=tags.get("fitness", "unknown"),
+        fitness=tags.get(layout.FITNESS, "unknown"),
         mode=params.get("mode", "paper"),
-        n_angles=int(params.get("n_angles", 40)),
+        n_angles=int(params.get("n_angles", DEFAULT_ANGLES)),
     )
 
 
@@ -225,18 +226,18 @@ def grid_trials(client, grid_id: str, experiment: str) -> list[TrialRun]:
     Raises:
         ExploreError: the grid has none.
     """
+    approach, fitness, index = (f"tags.{t}" for t in layout.TRIAL_TAGS)
     runs = search_trial_runs(client, grid_id, experiment)
-    if runs.empty or "tags.approach" not in runs:
+    if runs.empty or approach not in runs:
         raise ExploreError(f"grid {grid_id} has no trial runs")
     runs = latest_per_trial(runs)
-    runs = runs[(runs.status == "FINISHED") & runs["tags.approach"].isin(REPERTOIRE_APPROACHES)]
+    runs = runs[(runs.status == "FINISHED") & runs[approach].isin(REPERTOIRE_APPROACHES)]
     if runs.empty:
         raise ExploreError(
             f"grid {grid_id} has no finished trial of {', '.join(REPERTOIRE_APPROACHES)} to explore"
         )
 
-    then = "tags.trial_index" if "tags.trial_index" in runs else None
-    runs = in_study_order(runs, "tags.approach", "tags.fitness", then)
+    runs = in_study_order(runs, approach, fitness, index if index in runs else None)
     return [trial_run(client, run_id) for run_id in runs.run_id]
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.orchestrator.config import GridConfig
+from linkevo.workers.run_layout import trial_key
 
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 CODE_VERSION_ENV = "LINKEVO_CODE_VERSION"
@@ -39,7 +40,7 @@ class TrialCell:
     @property
     def key(self) -> str:
         """The trial key, e.g. "MAP-LIS/Fp/03"; unique within a grid and stable across runs."""
-        return f"{self.approach}/{self.fitness}/{self.index:02d}"
+        return trial_key(self.approach, self.fitness, self.index)
 
     @property
     def dirname(self) -> str:
@@ -116,3 +117,18 @@ class Grid:
             if cell.key == key:
                 return cell
         raise KeyError(key)
+
+
+def work_root(config: GridConfig, tracking_uri: str) -> Path:
+    """Returns the folder holding `trials/<grid_id>/...`: `work_dir`, else the embedded
+    store's folder, else `./runs`."""
+    if config.work_dir:
+        return Path(config.work_dir).expanduser().resolve()
+    if tracking_uri.startswith("sqlite:///"):
+        return Path(tracking_uri.removeprefix("sqlite:///")).parent
+    return Path("runs").resolve()
+
+
+def trial_dir(root: Path, grid: Grid, cell: TrialCell) -> Path:
+    """Returns a trial's folder for its files and checkpoints."""
+    return root / "trials" / grid.grid_id / cell.dirname

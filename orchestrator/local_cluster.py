@@ -23,16 +23,25 @@ import json
 import os
 import secrets
 import shutil
-import signal
-import socket
 import subprocess
 import sys
 import tempfile
 import time
-import urllib.request
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
+from linkevo.orchestrator.process_sessions import (
+    STOP_TIMEOUT_S,
+    ClusterError,
+    alive_sessions,
+    answers,
+    free_port,
+    in_use,
+    processes_using,
+    session_members,
+    spawn,
+    stop_session,
+)
 from linkevo.workers.artifacts import write_json_atomic, write_text_atomic
 
 STATE_FILE = "cluster.json"
@@ -40,11 +49,6 @@ TOKEN_FILE = "ray_auth_token"
 DATABASE = "mlflow"
 DB_USER = "linkevo"
 START_TIMEOUT_S = 120.0
-STOP_TIMEOUT_S = 20.0
-
-
-class ClusterError(RuntimeError):
-    """The local cluster cannot be started or stopped; the message says why and what to do."""
 
 
 @dataclass(frozen=True)
@@ -159,12 +163,12 @@ def up(settings: ClusterSettings) -> ClusterState:
     """
     folder = Path(settings.dir).resolve()
     previous = ClusterState.load(folder)
-    if previous is not None and _alive_sessions(_sessions(previous)):
+    if previous is not None and alive_sessions(_sessions(previous)):
         raise ClusterError(
             f"a cluster is already up in {folder}; stop it with: {_down_hint(folder)}"
         )
     ports = {
-        name: _port(getattr(settings, name), name)
+        name: free_port(getattr(settings, name), name)
         for name in ("postgres_port", "mlflow_port", "ray_port")
     }
     _postgres_bin()  # fails early when PostgreSQL is not installed
@@ -205,10 +209,10 @@ def down(folder: Path) -> list[str]:
         return []
     stopped = []
     for node in reversed(state.nodes):  # workers first, the head last
-        _stop_session(node.sid)
+        stop_session(node.sid)
         stopped.append(f"ray {node.role} {node.node_id[:8] or '(starting)'}")
     if state.mlflow_sid:
-        _stop_session(state.mlflow_sid)
+        stop_session(state.mlflow_sid)
         stopped.append("mlflow server")
     if Path(state.pg_data, "PG_VERSION").exists():
         _pg(
@@ -222,10 +226,10 @@ def down(folder: Path) -> list[str]:
             shutil.copyfile(
                 Path(state.pg_data, "server.log"), Path(state.dir, "logs", "postgresql.log")
             )
-    left = _alive_sessions(_sessions(state)) + _processes_using(state.pg_data, state.ray_temp)
+    left = alive_sessions(_sessions(state)) + processes_using(state.pg_data, state.ray_temp)
     if left:
         raise ClusterError(f"processes still running after the stop: {sorted(set(left))}")
-    busy = [p for p in (state.postgres_port, state.mlflow_port, state.ray_port) if _in_use(p)]
+    busy = [p for p in (state.postgres_port, state.mlflow_port, state.ray_port) if in_use(p)]
     if busy:
         raise ClusterError(f"ports still in use after the stop: {busy}")
     shutil.rmtree(state.pg_data, ignore_errors=True)
@@ -240,7 +244,7 @@ def stop_node(state: ClusterState, node: Node, force: bool = False) -> None:
     Without `force` the node drains first (Ray lets its running tasks end, up to 30 s);
     with it every process is killed at once (`ray stop --force`; a machine that dies).
     """
-    _stop_session(node.sid, force)
+    stop_session(node.sid, force)
     state.nodes = [n for n in state.nodes if n.sid != node.sid]
     state.save()
 
@@ -270,14 +274,14 @@ def _start_mlflow(state: ClusterState, workers: int) -> None:
     # connection (the MLflow client's) took about 60 ms on loopback against 12 ms here
     # (docs/scale.md). The background job runner (GenAI jobs) is not needed by linkevo.
     env = {**os.environ, "MLFLOW_SERVER_ENABLE_JOB_EXECUTION": "false"}
-    state.mlflow_sid = _spawn(command, Path(state.dir, "logs", "mlflow.log"), env)
+    state.mlflow_sid = spawn(command, Path(state.dir, "logs", "mlflow.log"), env)
     state.save()
 
 
 def _wait_for_mlflow(state: ClusterState) -> None:
     health = f"{state.tracking_uri}/health"
     what = f"the MLflow server at {health}"
-    _wait(lambda: _answers(health), what, "mlflow.log", state, state.mlflow_sid)
+    _wait(lambda: answers(health), what, "mlflow.log", state, state.mlflow_sid)
 
 
 def _start_ray(state: ClusterState, settings: ClusterSettings) -> None:
@@ -296,7 +300,7 @@ def _start_ray(state: ClusterState, settings: ClusterSettings) -> None:
     for role, command, cpus in plan:
         name = "ray-head.log" if role == "head" else f"ray-worker-{len(state.nodes)}.log"
         log = Path(state.dir, "logs", name)
-        node = Node(role=role, sid=_spawn(command, log, env), node_id="", cpus=cpus)
+        node = Node(role=role, sid=spawn(command, log, env), node_id="", cpus=cpus)
         state.nodes.append(node)
         state.save()
         _wait(lambda log=log: "Ray runtime started" in log.read_text(errors="replace"),
@@ -317,21 +321,12 @@ def _alive_nodes(state: ClusterState) -> int:
     return int(lines[-1]) if done.returncode == 0 and lines else -1
 
 
-def _spawn(command: list[str], log: Path, env: dict[str, str]) -> int:
-    with open(log, "wb") as out:
-        process = subprocess.Popen(
-            command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            env=env, start_new_session=True,
-        )  # fmt: skip
-    return process.pid
-
-
 def _wait(ready, what: str, log: str, state: ClusterState, sid: int = 0) -> None:
     """Polls `ready()` until true; fails when `sid`'s leader exits or after the timeout."""
     deadline = time.monotonic() + START_TIMEOUT_S
     path = Path(state.dir, "logs", log)
     while not ready():
-        if sid and sid not in _session_members(sid):
+        if sid and sid not in session_members(sid):
             tail = path.read_text(errors="replace").strip().splitlines()[-1:]
             raise ClusterError(f"{what} exited while starting ({' '.join(tail)}); see {path}")
         if time.monotonic() > deadline:
@@ -339,19 +334,11 @@ def _wait(ready, what: str, log: str, state: ClusterState, sid: int = 0) -> None
         time.sleep(0.2)
 
 
-def _answers(url: str) -> bool:
-    try:
-        with urllib.request.urlopen(url, timeout=2) as reply:
-            return reply.status == 200
-    except OSError:
-        return False
-
-
 def _node_id(sid: int) -> str:
     """Returns the Ray node id of the raylet in session `sid`."""
     deadline = time.monotonic() + START_TIMEOUT_S
     while time.monotonic() < deadline:
-        for pid in _session_members(sid):
+        for pid in session_members(sid):
             try:
                 args = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
             except OSError:
@@ -364,80 +351,8 @@ def _node_id(sid: int) -> str:
     raise ClusterError(f"no raylet appeared in the Ray node's process session {sid}")
 
 
-def _stop_session(sid: int, force: bool = False) -> None:
-    """Stops the process tree of session `sid`: SIGTERM to its leader (`ray start --block`
-    and `mlflow server` shut their children down in order), SIGKILL to what is left
-    (at once with `force`)."""
-    if not force:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(sid, signal.SIGTERM)
-        deadline = time.monotonic() + STOP_TIMEOUT_S
-        while _session_members(sid) and time.monotonic() < deadline:
-            time.sleep(0.1)
-    for pid in _session_members(sid):
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-    while _session_members(sid):
-        time.sleep(0.1)
-
-
-def _session_members(sid: int) -> list[int]:
-    """Pids of the live (not zombie) processes whose session id is `sid`."""
-    members = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            stat = (entry / "stat").read_text()
-        except OSError:
-            continue
-        fields = stat[stat.rindex(")") + 2 :].split()
-        if fields[0] != "Z" and int(fields[3]) == sid:  # state, ppid, pgrp, session
-            members.append(int(entry.name))
-    return members
-
-
 def _sessions(state: ClusterState) -> list[int]:
     return [n.sid for n in state.nodes] + ([state.mlflow_sid] if state.mlflow_sid else [])
-
-
-def _alive_sessions(sids: list[int]) -> list[int]:
-    return [pid for sid in sids for pid in _session_members(sid)]
-
-
-def _processes_using(*paths: str) -> list[int]:
-    """Pids whose command line names one of `paths` (PostgreSQL's own sessions)."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit() and int(entry.name) != os.getpid():
-            try:
-                args = (entry / "cmdline").read_bytes().decode(errors="replace")
-            except OSError:
-                continue
-            if any(p in args for p in paths):
-                found.append(int(entry.name))
-    return found
-
-
-def _port(wanted: int, name: str) -> int:
-    if wanted == 0:
-        with socket.socket() as probe:
-            probe.bind(("127.0.0.1", 0))
-            return probe.getsockname()[1]
-    if _in_use(wanted):
-        raise ClusterError(f"{name} {wanted} is already in use; pick another or pass 0 (any free)")
-    return wanted
-
-
-def _in_use(port: int) -> bool:
-    """Whether a process listens on `port` (a closed connection's TIME_WAIT does not count)."""
-    with socket.socket() as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind(("127.0.0.1", port))
-        except OSError:
-            return True
-    return False
 
 
 def _postgres_bin() -> Path:

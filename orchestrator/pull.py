@@ -11,6 +11,7 @@ import numpy as np
 
 from linkevo.sim.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.physical import TOGGLE_DEG
+from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES
 from linkevo.workers.artifacts import write_json_atomic, write_text_atomic
 from linkevo.workers.build_drawings import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.drawing import draw_linkage
@@ -168,7 +169,7 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     from linkevo.sim.layers import layer_plan
     from linkevo.sim.lego import QuantiseError, quantise
 
-    fitness = fitness if fitness in ("Fp", "Fsl") else "Fp"
+    fitness = fitness if fitness in SINGLE_FITNESSES else SINGLE_FITNESSES[0]
     try:
         q = quantise(genome, mode, fitness, n_angles)
     except QuantiseError as exc:
@@ -199,7 +200,7 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
     and template.pdf (1:1 on A4 pages) into out."""
     out.mkdir(parents=True, exist_ok=True)
     genome, mode = from_document(source.document)
-    n_angles = int(source.document.get("n_angles", 40))
+    n_angles = int(source.document.get("n_angles", DEFAULT_ANGLES))
     meta = {
         **source.document.get("meta", {}),
         "run_id": source.run_id,

@@ -24,12 +24,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.algorithms.factory import MAP_ELITES
 from linkevo.hardware.config import RobotConfig
 from linkevo.orchestrator.report.load import latest_per_trial, search_trial_runs
 from linkevo.orchestrator.simulate import log_simulated, simulate_source
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.robot import FLOORS
+from linkevo.sim.study import MAP_ELITES
+from linkevo.workers import run_layout as layout
 from linkevo.workers.linkages import LinkageRef, SourceLinkage, load_source, repertoire
 from linkevo.workers.repertoire_plots import select_paths
 
@@ -62,14 +63,17 @@ def choose_robots(
     runs = latest_per_trial(search_trial_runs(client, grid_id, experiment))
     if runs.empty:
         raise ValueError(f"grid {grid_id!r} has no trial runs in experiment {experiment!r}")
-    runs = runs[(runs["status"] == "FINISHED") & (runs["tags.fitness"] == FITNESS)]
+    approach_tag, fitness_tag, key_tag = (
+        f"tags.{t}" for t in (layout.APPROACH, layout.FITNESS, layout.TRIAL_KEY)
+    )
+    runs = runs[(runs["status"] == "FINISHED") & (runs[fitness_tag] == FITNESS)]
     robots = []
     for approach in MAP_ELITES:
-        trials = runs[runs["tags.approach"] == approach]
+        trials = runs[runs[approach_tag] == approach]
         if trials.empty:
             continue
-        best = trials.sort_values(["metrics.best_loss", "tags.trial_key"]).iloc[0]
-        run_id, key = str(best["run_id"]), str(best["tags.trial_key"])
+        best = trials.sort_values(["metrics.best_loss", key_tag]).iloc[0]
+        run_id, key = str(best["run_id"]), str(best[key_tag])
         first = load_source(client, LinkageRef(run_id))
         with tempfile.TemporaryDirectory() as tmp:
             table = repertoire(client, run_id, Path(tmp))

@@ -6,10 +6,11 @@ Pure numerics (numpy and numba): no Ray, MLflow, torch or file I/O.
 from linkevo.sim.decode import LinkageBatch, decode
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace, bin_descriptors
 from linkevo.sim.evaluate import evaluate
-from linkevo.sim.evaluation import FITNESSES, MODES, Evaluation
+from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.fitness import Target, named_target
 from linkevo.sim.genome import N_GENES, GenomeError, random_genomes, validate_genomes
 from linkevo.sim.kinematics import Motion, simulate
+from linkevo.sim.study import FITNESSES, MODES
 
 __all__ = [
     "DESCRIPTOR_SPACES",

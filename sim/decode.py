@@ -7,8 +7,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim import kernels
-from linkevo.sim.evaluation import MODES
 from linkevo.sim.genome import MAX_BEAMS, N_NODES, validate_genomes
+from linkevo.sim.study import MODES
 
 NODE_KINDS = ("motor", "static", "crank", "triangle", "extension")
 BEAM_KINDS = ("crank", "triangle", "extension")

@@ -12,7 +12,8 @@ from linkevo.sim.decode import check_mode
 from linkevo.sim.evaluation import Evaluation, field_shapes
 from linkevo.sim.fitness import FITNESS_CODES, N_OBJECTIVES, Target, check_fitness, named_target
 from linkevo.sim.genome import validate_genomes
-from linkevo.sim.kinematics import DEFAULT_ANGLES, check_angles
+from linkevo.sim.kinematics import check_angles
+from linkevo.sim.study import DEFAULT_ANGLES
 
 
 def evaluate(
@@ -37,7 +38,7 @@ def evaluate(
 
     Raises:
         ValueError: for bad genomes (`sim.genome.GenomeError`), an unknown fitness or
-            mode, n_angles < 2 or an `out` of the wrong layout; raised before any work
+            mode, n_angles < MIN_ANGLES or an `out` of the wrong layout; raised before any work
             starts.
     """
     legacy = check_mode(mode)

@@ -4,16 +4,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
 from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
 
-Mode = Literal["paper", "legacy"]
-MODES: tuple[str, ...] = ("paper", "legacy")
-Fitness = Literal["Fp", "Fsl", "Fp2", "Fsl2"]
-FITNESSES: tuple[str, ...] = ("Fp", "Fsl", "Fp2", "Fsl2")
 DESCRIPTOR_WIDTHS: dict[str, int] = {name: DESCRIPTOR_SPACES[name].dims for name in COVERAGE_SPACES}
 """Columns of each descriptor array `sim.evaluate` computes, by approach."""
 ALIGNMENT = 64

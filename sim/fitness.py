@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linkevo.sim.evaluation import FITNESSES
 from linkevo.sim.kernels import FP, FP2, FSL, FSL2
+from linkevo.sim.study import FITNESSES, TARGETS
 
 FITNESS_CODES: dict[str, int] = {"Fp": FP, "Fsl": FSL, "Fp2": FP2, "Fsl2": FSL2}
 """Kernel code of each fitness name."""
@@ -91,14 +91,13 @@ _D24 = _laying_d(
     np.arange(-9.0, 10.0, 3.0),
     [1.196875, 1.696875, 1.946875, 2.046875, 1.946875, 1.696875, 1.196875],
 )
-NAMED_TARGETS: tuple[str, ...] = ("D16", "D24")
 
 
 def named_target(name: str = "D16") -> Target:
     """Returns a published target: "D16" (the paper's, default) or "D24" (flatter)."""
     table = {"D16": _D16, "D24": _D24}
     if name not in table:
-        raise ValueError(f"unknown target {name!r}; allowed: {', '.join(NAMED_TARGETS)} or a file")
+        raise ValueError(f"unknown target {name!r}; allowed: {', '.join(TARGETS)} or a file")
     points, is_step = table[name]
     return Target(points=points.copy(), is_step=is_step.copy(), name=name)
 

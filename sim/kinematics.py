@@ -9,8 +9,7 @@ import numpy as np
 from linkevo.sim import kernels
 from linkevo.sim.decode import LinkageBatch
 from linkevo.sim.genome import MAX_BEAMS, N_NODES
-
-DEFAULT_ANGLES = 40
+from linkevo.sim.study import DEFAULT_ANGLES, MIN_ANGLES
 
 
 @dataclass(frozen=True)
@@ -37,9 +36,10 @@ class Motion:
 
 
 def check_angles(n_angles: int) -> int:
-    """Returns n_angles if it is an int >= 2, else raises ValueError."""
-    if isinstance(n_angles, bool) or not isinstance(n_angles, int | np.integer) or n_angles < 2:
-        raise ValueError(f"n_angles must be an integer >= 2, got {n_angles!r}")
+    """Returns n_angles if it is an int >= MIN_ANGLES, else raises ValueError."""
+    bad = isinstance(n_angles, bool) or not isinstance(n_angles, int | np.integer)
+    if bad or n_angles < MIN_ANGLES:
+        raise ValueError(f"n_angles must be an integer >= {MIN_ANGLES}, got {n_angles!r}")
     return int(n_angles)
 
 

@@ -12,6 +12,7 @@ from linkevo.sim.decode import NODE_KINDS, decode
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.layers import layer_plan
 from linkevo.sim.lego import QuantiseError, quantise
+from linkevo.sim.study import DEFAULT_ANGLES
 
 POSE_ANGLES = 360
 """Crank angles per turn at which a leg's poses are known (one degree apart)."""
@@ -110,7 +111,7 @@ def leg_from_genome(genome: np.ndarray, mode: str = "paper") -> Leg:
     kinds = [NODE_KINDS[int(k)] for k in batch.node_int[0, :, 0]]
     frame_nodes = [j for j, kind in enumerate(kinds) if kind in ("motor", "static")]
     part = rigid_parts(batch.node_int[0], beams, frame_nodes)
-    plan = layer_plan(batch, simulate(batch, 40))
+    plan = layer_plan(batch, simulate(batch, DEFAULT_ANGLES))
     return Leg(
         paths=motion.positions[0],
         beams=beams,

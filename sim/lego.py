@@ -22,8 +22,9 @@ import numpy as np
 from linkevo.sim import reference
 from linkevo.sim.decode import NODE_KINDS, LinkageBatch, decode
 from linkevo.sim.fitness import named_target
-from linkevo.sim.kinematics import DEFAULT_ANGLES, Motion, simulate
+from linkevo.sim.kinematics import Motion, simulate
 from linkevo.sim.physical import PhysicalChecks, max_stretch, physical_checks
+from linkevo.sim.study import DEFAULT_ANGLES
 
 EXACT = 1e-9
 """Largest beam stretch (modules) of a rounding that counts as exact kinematics."""

@@ -7,8 +7,9 @@ import numpy as np
 from linkevo.sim import kernels
 from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
 from linkevo.sim.genome import MAX_BEAMS, N_GENES, N_NODES, validate_genomes
-from linkevo.sim.kinematics import DEFAULT_ANGLES, Motion, check_angles, simulate
+from linkevo.sim.kinematics import Motion, check_angles, simulate
 from linkevo.sim.physical import physical_checks
+from linkevo.sim.study import DEFAULT_ANGLES
 
 FORMAT = "linkevo.linkage/2"
 """Version 2 adds each node's and beam's topology, so a document rebuilds without its genome."""

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linkevo.sim.evaluation import FITNESSES, MODES, Evaluation
+from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.fitness import Target, named_target
 from linkevo.sim.genome import (
     BLOCK_SIZE,
@@ -23,6 +23,7 @@ from linkevo.sim.genome import (
     N_STATIC,
     validate_genomes,
 )
+from linkevo.sim.study import FITNESSES, MODES
 
 Point = tuple[float, float]
 

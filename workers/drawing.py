@@ -11,7 +11,8 @@ import numpy as np
 
 from linkevo.sim.decode import decode
 from linkevo.sim.genome import validate_genomes
-from linkevo.sim.kinematics import DEFAULT_ANGLES, simulate
+from linkevo.sim.kinematics import simulate
+from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.artifacts import atomic_path
 
 SUFFIXES = (".png", ".gif")

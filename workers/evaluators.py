@@ -11,7 +11,8 @@ import numpy as np
 
 from linkevo.sim.evaluate import evaluate
 from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.fitness import N_OBJECTIVES, NAMED_TARGETS, Target, named_target
+from linkevo.sim.fitness import N_OBJECTIVES, Target, named_target
+from linkevo.sim.study import DEFAULT_ANGLES, TARGETS
 from linkevo.workers.result_pool import MemoryBuffer, ResultPool
 
 Pending = Callable[[], Evaluation]
@@ -38,12 +39,12 @@ def resolve_target(target: str) -> Target:
         ValueError: naming the value when it is neither a published name nor a readable
             JSON target file.
     """
-    if target in NAMED_TARGETS:
+    if target in TARGETS:
         return named_target(target)
     path = Path(target)
     if not path.is_file():
         raise ValueError(
-            f"target {target!r} is neither a published target ({', '.join(NAMED_TARGETS)}) "
+            f"target {target!r} is neither a published target ({', '.join(TARGETS)}) "
             "nor an existing JSON file"
         )
     try:
@@ -66,7 +67,9 @@ class LocalEvaluator:
         n_angles: crank angles per turn.
     """
 
-    def __init__(self, fitness: str, mode: str, target: str = "D16", n_angles: int = 40) -> None:
+    def __init__(
+        self, fitness: str, mode: str, target: str = "D16", n_angles: int = DEFAULT_ANGLES
+    ) -> None:
         self.fitness = fitness
         self.mode = mode
         self.target = resolve_target(target)

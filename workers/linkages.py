@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.linkage_doc import to_document
+from linkevo.workers import run_layout as layout
 
 if TYPE_CHECKING:
     from mlflow.tracking import MlflowClient
@@ -97,8 +98,8 @@ def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
         run_id=ref.run_id,
         cell=cell,
         experiment_id=run.info.experiment_id,
-        approach=tags.get("approach", "unknown"),
-        fitness=tags.get("fitness", "unknown"),
+        approach=tags.get(layout.APPROACH, "unknown"),
+        fitness=tags.get(layout.FITNESS, "unknown"),
         document=document,
     )
 
@@ -107,7 +108,7 @@ def repertoire(client: MlflowClient, run_id: str, tmp: Path):
     """Returns the run's repertoire.parquet as a pandas table (a row per filled cell)."""
     import pandas as pd
 
-    return pd.read_parquet(_download(client, run_id, "repertoire.parquet", tmp))
+    return pd.read_parquet(_download(client, run_id, layout.REPERTOIRE, tmp))
 
 
 def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:

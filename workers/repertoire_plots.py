@@ -14,9 +14,9 @@ from matplotlib.collections import LineCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 
-from linkevo.algorithms.factory import MAP_ELITES
 from linkevo.algorithms.pareto import non_dominated_ranks
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.sim.study import is_map_elites, is_pareto
 from linkevo.workers.artifacts import atomic_path
 
 DOWNSAMPLED = 5
@@ -26,16 +26,6 @@ STRIP_PATHS = 5
 LOSS_CMAP = "viridis"
 CLIP_QUANTILE = 0.95
 """Loss colour scales end at this quantile of the losses shown."""
-
-
-def is_map_elites(approach: str) -> bool:
-    """Returns True for the MAP-Elites approaches (each with its own descriptor grid)."""
-    return approach in MAP_ELITES
-
-
-def is_pareto(approach: str) -> bool:
-    """Returns True for the multi-objective approach (NSGA-II)."""
-    return approach in ("NSGA-II", "NSGA2")
 
 
 def loss_norm(losses: np.ndarray) -> Normalize:

@@ -12,28 +12,29 @@ from pathlib import Path
 
 import numpy as np
 
-from linkevo.algorithms import (
+from linkevo.algorithms import Optimizer, eval_fitness, make_optimizer
+from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.study import (
     APPROACHES,
+    DEFAULT_ANGLES,
+    DEFAULT_BATCH,
+    MIN_ANGLES,
+    MODES,
     REPERTOIRE_APPROACHES,
     SINGLE_FITNESSES,
-    Optimizer,
-    eval_fitness,
-    make_optimizer,
 )
-from linkevo.sim.evaluation import MODES
-from linkevo.sim.linkage_doc import to_document
 from linkevo.workers.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
 from linkevo.workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
 from linkevo.workers.drawing import draw_linkage
 from linkevo.workers.evaluators import Evaluator, resolve_target
 from linkevo.workers.recorders import MetricsCsv, Recorder
 from linkevo.workers.repertoire_plots import draw_trial_maps
+from linkevo.workers.run_layout import BEST_JSON
 
 CHECKPOINT_DIR = "checkpoint"
 METRICS_FILE = "metrics.csv"
 SETTINGS_FILE = "settings.json"
 RESULT_FILE = "result.json"
-BEST_JSON = "best_linkage.json"
 BEST_PNG = "best_linkage.png"
 ENCODER_PT = "encoder.pt"
 FLOAT32_COLUMNS: tuple[str, ...] = ("foot_x", "foot_y")
@@ -57,8 +58,7 @@ class TrialSpec:
     """One trial: which search, on which loss, for how many evaluations.
 
     Attributes:
-        approach: one of `algorithms.APPROACHES` ("EA", "NSGA2", "MAP-WH", "MAP-LIS",
-            "MAP-ST", "MAP-AU", "RANDOM").
+        approach: one of `sim.study.APPROACHES`.
         fitness: "Fp" or "Fsl" (NSGA-II evaluates the two-objective variant).
         evaluations: the budget; the trial runs whole batches while they fit in it (the
             initial population counts), so it must be >= batch_size.
@@ -66,7 +66,7 @@ class TrialSpec:
         mode: "paper" or "legacy".
         seed: seed of the optimizer (>= 0).
         target: F_p target: "D16", "D24" or a JSON target file.
-        n_angles: crank angles per turn (>= 2).
+        n_angles: crank angles per turn (>= `sim.study.MIN_ANGLES`).
         checkpoint_every: iterations between checkpoints (>= 1).
         max_seconds: optional wall-clock limit of one `run_trial` call, checked after each
             iteration (so at least one runs).
@@ -79,11 +79,11 @@ class TrialSpec:
     approach: str
     fitness: str
     evaluations: int
-    batch_size: int = 5000
+    batch_size: int = DEFAULT_BATCH
     mode: str = "paper"
     seed: int = 0
     target: str = "D16"
-    n_angles: int = 40
+    n_angles: int = DEFAULT_ANGLES
     checkpoint_every: int = 10
     max_seconds: float | None = None
     options: dict = field(default_factory=dict)
@@ -107,8 +107,8 @@ class TrialSpec:
             )
         if not _is_int(self.seed) or self.seed < 0:
             fail(f"seed must be a non-negative integer, got {self.seed!r}")
-        if not _is_int(self.n_angles) or self.n_angles < 2:
-            fail(f"n_angles must be an integer >= 2, got {self.n_angles!r}")
+        if not _is_int(self.n_angles) or self.n_angles < MIN_ANGLES:
+            fail(f"n_angles must be an integer >= {MIN_ANGLES}, got {self.n_angles!r}")
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
             fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
         if self.max_seconds is not None and not (

@@ -15,12 +15,12 @@ import ray
 from mlflow.entities import Param, Run
 from mlflow.tracking import MlflowClient
 
+from linkevo.workers import run_layout as layout
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.mlflow_recorder import MlflowRecorder
 from linkevo.workers.ray_evaluator import ActorPoolEvaluator
 from linkevo.workers.trial import TrialSpec, run_trial
 
-ERROR_TAG_CHARS = 500
 """How much of a failure message the `error` tag keeps."""
 RETRYABLE_ERRORS: tuple[type[BaseException], ...] = (
     ray.exceptions.RayActorError,
@@ -77,16 +77,16 @@ class TrialJob:
     def tags(self) -> dict[str, str]:
         """Returns the tags of the trial's MLflow run (host and Ray node: where it runs)."""
         return {
-            "mlflow.parentRunId": self.parent_run_id,
-            "linkevo.kind": "trial",
-            "grid_id": self.grid_id,
-            "trial_key": self.trial_key,
-            "approach": self.spec.approach,
-            "fitness": self.spec.fitness,
-            "seed": str(self.spec.seed),
-            "trial_index": str(self.trial_index),
-            "host": socket.gethostname(),
-            "ray_node": ray.get_runtime_context().get_node_id(),
+            layout.PARENT: self.parent_run_id,
+            layout.KIND: layout.TRIAL,
+            layout.GRID_ID: self.grid_id,
+            layout.TRIAL_KEY: self.trial_key,
+            layout.APPROACH: self.spec.approach,
+            layout.FITNESS: self.spec.fitness,
+            layout.SEED: str(self.spec.seed),
+            layout.TRIAL_INDEX: str(self.trial_index),
+            layout.HOST: socket.gethostname(),
+            layout.RAY_NODE: ray.get_runtime_context().get_node_id(),
         }
 
 
@@ -119,36 +119,10 @@ class TrialOutcome:
     qd_score: float | None = None
 
 
-def trial_runs(
-    client: MlflowClient,
-    experiment_id: str,
-    grid_id: str,
-    *,
-    trial_key: str | None = None,
-    status: str | None = None,
-) -> list[Run]:
-    """Returns the grid's trial runs, optionally of one trial key and/or one status."""
-    clauses = [f"tags.grid_id = '{grid_id}'", "tags.`linkevo.kind` = 'trial'"]
-    if trial_key is not None:
-        clauses.append(f"tags.trial_key = '{trial_key}'")
-    if status is not None:
-        clauses.append(f"attributes.status = '{status}'")
-    runs: list[Run] = []
-    token = None
-    while True:
-        page = client.search_runs(
-            [experiment_id], " and ".join(clauses), max_results=1000, page_token=token
-        )
-        runs.extend(page)
-        token = page.token
-        if not token:
-            return runs
-
-
 def end_run(client: MlflowClient, run_id: str, status: str, message: str = "") -> None:
     """Ends a run with `status`, tagging `error` with the (truncated) message if any."""
     if message:
-        client.set_tag(run_id, "error", message[:ERROR_TAG_CHARS])
+        client.set_tag(run_id, layout.ERROR, message[: layout.ERROR_CHARS])
     client.set_terminated(run_id, status)
 
 
@@ -157,14 +131,14 @@ def outcome_of(run: Run, seconds: float = 0.0) -> TrialOutcome:
     metrics = run.data.metrics
     evaluations = metrics.get("evaluations")
     return TrialOutcome(
-        trial_key=run.data.tags["trial_key"],
+        trial_key=run.data.tags[layout.TRIAL_KEY],
         status=run.info.status,
         run_id=run.info.run_id,
         best_loss=metrics.get("best_loss"),
         evaluations=None if evaluations is None else int(evaluations),
         seconds=seconds,
-        error=run.data.tags.get("error", ""),
-        stopped_by=run.data.tags.get("stopped_by", "budget"),
+        error=run.data.tags.get(layout.ERROR, ""),
+        stopped_by=run.data.tags.get(layout.STOPPED_BY, "budget"),
         coverage=metrics.get("coverage"),
         qd_score=metrics.get("qd_score"),
     )
@@ -192,7 +166,7 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
     A run that a resuming driver marked KILLED meanwhile is not marked FINISHED.
     """
     client = MlflowClient(job.tracking_uri)
-    earlier = trial_runs(client, job.experiment_id, job.grid_id, trial_key=job.trial_key)
+    earlier = layout.trial_runs(client, job.experiment_id, job.grid_id, trial_key=job.trial_key)
     for run in earlier:
         if run.info.status == "FINISHED":
             return outcome_of(run)
@@ -225,7 +199,7 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
                 placement_group=ray.util.get_current_placement_group(),
             )
         result = run_trial(spec, evaluator, recorder, out_dir, resume=True)
-        client.set_tag(run_id, "stopped_by", result.stopped_by)
+        client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by)
     except RETRYABLE_ERRORS as exc:
         _flush_quietly(recorder)
         end_run(client, run_id, "KILLED", _describe(exc))

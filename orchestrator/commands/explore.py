@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.workers import run_layout as layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -53,7 +54,6 @@ def handle(args: argparse.Namespace) -> int:
 
     from mlflow.tracking import MlflowClient
 
-    from linkevo.orchestrator.commands.report import GRID_ID
     from linkevo.orchestrator.explore import (
         GRID_DRAWN,
         PAGE_ARTIFACT,
@@ -65,7 +65,7 @@ def handle(args: argparse.Namespace) -> int:
     from linkevo.orchestrator.report.load import GridNotFoundError, find_grid_run
     from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
-    if not GRID_ID.fullmatch(args.ref):  # it goes into an MLflow filter string
+    if not layout.ID_PATTERN.fullmatch(args.ref):  # it goes into an MLflow filter string
         raise CliError(
             f"{args.ref!r} is neither a run id nor a grid id; allowed: letters, digits, '.', "
             "'_', '-'"

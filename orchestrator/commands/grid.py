@@ -6,10 +6,18 @@ import argparse
 import json
 import shlex
 import signal
+import statistics
 import subprocess
 import sys
+from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
+
+if TYPE_CHECKING:
+    from linkevo.orchestrator.config import GridConfig
+    from linkevo.orchestrator.driver import GridResult
+    from linkevo.orchestrator.grid import Grid
+    from linkevo.orchestrator.reservation import Cluster
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -89,11 +97,14 @@ def run_grid(args: argparse.Namespace) -> int:
         overrides.append(f"max_concurrent_trials={args.max_concurrent_trials}")
     grid = Grid.from_config(grid_config.load(args.config, overrides))
     from linkevo.orchestrator import driver
+    from linkevo.orchestrator.fan_out import GridInterrupted
+    from linkevo.orchestrator.ray_connection import dry_run_cluster
+    from linkevo.workers.tracking import resolve_tracking_uri
 
     if args.dry_run:
         driver.trial_specs(grid)  # refuses what the launch would refuse
-        driver.check_tracking_uri(driver.resolve_tracking_uri(grid.config.tracking_uri or None))
-        print(driver.describe(grid, driver.dry_run_cluster(args.address)))
+        driver.check_tracking_uri(resolve_tracking_uri(grid.config.tracking_uri or None))
+        print(describe(grid, dry_run_cluster(args.address)))
         return 0
     try:
         result = driver.launch(
@@ -103,13 +114,13 @@ def run_grid(args: argparse.Namespace) -> int:
             address=args.address,
             progress=not args.no_progress,
         )
-    except driver.GridInterrupted as exc:
+    except GridInterrupted as exc:
         print(
             f"linkevo grid: {exc}.\nComplete the grid with:  {_resume_command(args)}",
             file=sys.stderr,
         )
         return 128 + int(getattr(signal, exc.signal_name))
-    print(driver.summary(result, grid.config))
+    print(summary(result, grid.config))
     print(
         f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."
     )
@@ -153,3 +164,61 @@ def run_ui(args: argparse.Namespace) -> int:
     command += ["--host", "127.0.0.1", "--port", str(args.port)]
     print(f"MLflow UI on http://127.0.0.1:{args.port}  (Ctrl-C stops it)", file=sys.stderr)
     return subprocess.call(command)
+
+
+def describe(grid: Grid, cluster: Cluster) -> str:
+    """Returns the dry-run text: resolved config, grid id, reservation and every trial."""
+    from linkevo.orchestrator.config import to_toml
+    from linkevo.orchestrator.reservation import Reservation
+
+    cfg = grid.config
+    reservation = Reservation.plan(cfg, len(grid.cells), cluster)
+    where = "this machine" if cluster.local else "the Ray cluster"
+    lines = [
+        to_toml(cfg).rstrip(),
+        "",
+        f"grid {grid.grid_id}  code {grid.code_version}  {len(grid.cells)} trials",
+        f"on {where} ({cluster.total_cpus:g} CPU): {reservation.describe()}",
+        "",
+        f"{'trial key':<20} {'seed':>10}",
+    ]
+    lines += [f"{cell.key:<20} {cell.seed:>10}" for cell in grid.cells]
+    return "\n".join(lines)
+
+
+def _fmt(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4g}"
+
+
+def summary(result: GridResult, config: GridConfig) -> str:
+    """Returns the end-of-grid table: per cell trials finished and best loss (min, median),
+    then every failed trial with its error."""
+    lines = [
+        f"grid {result.grid_id}: {len(result.outcomes) - len(result.failed)}/"
+        f"{len(result.outcomes)} trials finished ({len(result.skipped)} already finished "
+        f"before this launch), {len(result.failed)} failed, {result.seconds:.0f} s",
+        "",
+        f"{'approach':<9} {'fitness':<7} {'finished':>8} {'best loss min':>14} {'median':>10}",
+    ]
+    for approach in config.approaches:
+        for fitness in config.fitnesses:
+            cell = [o for o in result.outcomes if o.trial_key.startswith(f"{approach}/{fitness}/")]
+            losses = [
+                o.best_loss for o in cell if o.status == "FINISHED" and o.best_loss is not None
+            ]
+            done = sum(o.status == "FINISHED" for o in cell)
+            lines.append(
+                f"{approach:<9} {fitness:<7} {f'{done}/{len(cell)}':>8} "
+                f"{_fmt(min(losses) if losses else None):>14} "
+                f"{_fmt(statistics.median(losses) if losses else None):>10}"
+            )
+    cut = [o.trial_key for o in result.outcomes if o.stopped_by == "max_seconds"]
+    if cut:
+        lines += [
+            "",
+            f"{len(cut)} trial(s) stopped by max_seconds before their budget: {', '.join(cut)}",
+        ]
+    if result.failed:
+        lines += ["", "failed trials:"]
+        lines += [f"  {o.trial_key:<18} {o.error or o.status}" for o in result.failed]
+    return "\n".join(lines)

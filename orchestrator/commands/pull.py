@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.workers import run_layout as layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,7 +50,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=handle)
 
 
-GRID_ID = re.compile(r"[0-9a-f]{6,64}")
 """What a grid id looks like (the first 12 hex digits of a hash, `docs/grid.md`)."""
 
 
@@ -64,22 +63,17 @@ def best_trial(client, experiment: str, grid_id: str, approach: str | None, fitn
     exp = client.get_experiment_by_name(experiment)
     if exp is None:
         raise CliError(f"--experiment {experiment!r} does not exist in this tracking store")
-    grids = client.search_runs([exp.experiment_id], "tags.`linkevo.kind` = 'grid'")
-    known = sorted({r.data.tags.get("grid_id", "") for r in grids} - {""})
-    if not GRID_ID.fullmatch(grid_id) or grid_id not in known:
+    grids = layout.grid_runs(client, exp.experiment_id)
+    known = sorted({r.data.tags.get(layout.GRID_ID, "") for r in grids} - {""})
+    if not layout.ID_PATTERN.fullmatch(grid_id) or grid_id not in known:
         raise CliError(
             f"no grid {grid_id!r} in experiment {experiment!r}; known grids: "
             f"{', '.join(known) or 'none'}"
         )
-    trials = client.search_runs(
-        [exp.experiment_id],
-        f"tags.grid_id = '{grid_id}' and tags.`linkevo.kind` = 'trial' "
-        "and attributes.status = 'FINISHED'",
-        max_results=50_000,
-    )
+    trials = layout.trial_runs(client, exp.experiment_id, grid_id, status="FINISHED")
     choices = {
         key: sorted({r.data.tags.get(key, "") for r in trials} - {""})
-        for key in ("approach", "fitness")
+        for key in (layout.APPROACH, layout.FITNESS)
     }
     for key, value in (("approach", approach), ("fitness", fitness)):
         if value is not None and value not in choices[key]:
@@ -95,8 +89,8 @@ def best_trial(client, experiment: str, grid_id: str, approach: str | None, fitn
     kept = [
         r
         for r in trials
-        if (approach is None or r.data.tags.get("approach") == approach)
-        and (fitness is None or r.data.tags.get("fitness") == fitness)
+        if (approach is None or r.data.tags.get(layout.APPROACH) == approach)
+        and (fitness is None or r.data.tags.get(layout.FITNESS) == fitness)
         and "best_loss" in r.data.metrics
     ]
     if not kept:

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import re
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.workers import run_layout as layout
 
-GRID_ID = re.compile(r"[A-Za-z0-9_.-]+")
 """What a grid id may hold (it goes into an MLflow filter string)."""
 
 
@@ -68,7 +67,7 @@ def handler(args: argparse.Namespace) -> int:
     from linkevo.orchestrator.report import GridNotFoundError, build_report
     from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
-    if args.grid_id is not None and not GRID_ID.fullmatch(args.grid_id):
+    if args.grid_id is not None and not layout.ID_PATTERN.fullmatch(args.grid_id):
         raise CliError(
             f"grid id {args.grid_id!r} is invalid; allowed: letters, digits, '.', '_', '-' "
             "(see the grid_id tag of a grid run, or use --latest)"
@@ -102,7 +101,7 @@ def compare_handler(args: argparse.Namespace) -> int:
     from linkevo.workers.tracking import require_store, resolve_tracking_uri
 
     for grid in (args.grid_a, args.grid_b):
-        if not GRID_ID.fullmatch(grid):
+        if not layout.ID_PATTERN.fullmatch(grid):
             raise CliError(f"grid id {grid!r} is invalid; allowed: letters, digits, '.', '_', '-'")
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:

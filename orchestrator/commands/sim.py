@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.sim.evaluation import FITNESSES, MODES
 from linkevo.sim.genome import GenomeError, validate_genomes
+from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, MIN_ANGLES, MODES
 from linkevo.workers.drawing import SUFFIXES
 
 
@@ -25,7 +25,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     ev.add_argument("--fitness", choices=FITNESSES, default="Fp", help="loss to compute")
     ev.add_argument("--mode", choices=MODES, default="paper", help="spec mode")
     ev.add_argument("--target", default="D16", help="D16 (default), D24 or a JSON target file")
-    ev.add_argument("--angles", type=int, default=40, help="crank angles per turn (>= 2)")
+    ev.add_argument(
+        "--angles",
+        type=int,
+        default=DEFAULT_ANGLES,
+        help=f"crank angles per turn (>= {MIN_ANGLES})",
+    )
     ev.add_argument("--out", type=Path, required=True, help="the result .npz file")
     ev.set_defaults(func=run_eval)
 
@@ -36,7 +41,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     show.add_argument("source", help="LINKAGE.json or GENOMES.npy[:ROW] (row 0 by default)")
     show.add_argument("--mode", choices=MODES, default=None, help="for .npy input (default paper)")
-    show.add_argument("--angles", type=int, default=40, help="crank angles per turn (>= 2)")
+    show.add_argument(
+        "--angles",
+        type=int,
+        default=DEFAULT_ANGLES,
+        help=f"crank angles per turn (>= {MIN_ANGLES})",
+    )
     show.add_argument("--out", type=Path, required=True, help="FILE.png (still) or FILE.gif")
     show.set_defaults(func=run_show)
 
@@ -68,9 +78,9 @@ def check_writable(path: Path, suffixes: tuple[str, ...]) -> None:
 
 
 def check_angles(angles: int) -> None:
-    """Raises CliError unless `angles` (crank angles per turn) is at least 2."""
-    if angles < 2:
-        raise CliError(f"--angles must be >= 2, got {angles}")
+    """Raises CliError unless `angles` (crank angles per turn) is at least MIN_ANGLES."""
+    if angles < MIN_ANGLES:
+        raise CliError(f"--angles must be >= {MIN_ANGLES}, got {angles}")
 
 
 def run_eval(args: argparse.Namespace) -> int:

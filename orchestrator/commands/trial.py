@@ -8,9 +8,15 @@ import os
 import tempfile
 from pathlib import Path
 
-from linkevo.algorithms import APPROACHES, SINGLE_FITNESSES
 from linkevo.orchestrator.cli import CliError
-from linkevo.sim.evaluation import MODES
+from linkevo.sim.study import (
+    APPROACHES,
+    DEFAULT_ANGLES,
+    DEFAULT_BATCH,
+    MIN_ANGLES,
+    MODES,
+    SINGLE_FITNESSES,
+)
 from linkevo.workers.checkpoint import CheckpointError
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import ProgressRecorder
@@ -39,13 +45,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--evaluations", required=True, type=int, help="evaluation budget (>= batch size)"
     )
-    parser.add_argument("--batch-size", type=int, default=5000, help="children per iteration")
+    parser.add_argument(
+        "--batch-size", type=int, default=DEFAULT_BATCH, help="children per iteration"
+    )
     parser.add_argument("--mode", default="paper", help=f"one of {', '.join(MODES)}")
     parser.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     parser.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
     parser.add_argument("--target", default="D16", help="F_p target: D16, D24 or a JSON file")
-    parser.add_argument("--n-angles", type=int, default=40, help="crank angles per turn")
+    parser.add_argument(
+        "--n-angles",
+        type=int,
+        default=DEFAULT_ANGLES,
+        help=f"crank angles per turn (>= {MIN_ANGLES})",
+    )
     parser.add_argument(
         "--checkpoint-every", type=int, default=10, help="iterations between checkpoints"
     )

@@ -13,6 +13,7 @@ from linkevo.orchestrator.report.load import GridData, in_study_order
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.physical import physical_checks
+from linkevo.sim.study import DEFAULT_ANGLES
 
 TRIAL_CHECK_COLUMNS: tuple[str, ...] = (
     "trial_key",
@@ -42,7 +43,7 @@ def best_linkage_checks(grid: GridData) -> pd.DataFrame:
     decoded = [d for d in decoded if d is not None]
     if trials.empty:
         return pd.DataFrame(columns=list(TRIAL_CHECK_COLUMNS))
-    n_angles = int(grid.config.get("n_angles", 40))
+    n_angles = int(grid.config.get("n_angles", DEFAULT_ANGLES))
     parts = []
     for mode in sorted({mode for _, mode in decoded}):
         rows = [i for i, (_, m) in enumerate(decoded) if m == mode]

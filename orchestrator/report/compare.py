@@ -8,8 +8,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.load import APPROACH_ORDER, FITNESS_ORDER, load_grid, ordered
+from linkevo.orchestrator.report.load import load_grid
 from linkevo.orchestrator.report.stats import ALPHA, a12, holm, mann_whitney
+from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 
 COLUMNS: tuple[str, ...] = (
     "fitness", "approach", "n_a", "median_a", "n_b", "median_b", "difference",
@@ -35,10 +36,10 @@ def compare_grids(
             for grid in (grid_a, grid_b)
         ]
     rows = []
-    for fitness in ordered(set(done[0].fitness) & set(done[1].fitness), FITNESS_ORDER):
+    for fitness in ordered(set(done[0].fitness) & set(done[1].fitness), FITNESSES):
         shared = set(done[0].approach[done[0].fitness == fitness])
         shared &= set(done[1].approach[done[1].fitness == fitness])
-        for approach in ordered(shared, APPROACH_ORDER):
+        for approach in ordered(shared, APPROACHES):
             x, y = (
                 d.best_loss[(d.fitness == fitness) & (d.approach == approach)].to_numpy()
                 for d in done

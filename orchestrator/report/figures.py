@@ -10,6 +10,7 @@ from matplotlib.figure import Figure
 
 from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.sim.study import is_map_elites, label
 from linkevo.workers.repertoire_plots import (
     DOWNSAMPLED,
     LOSS_CMAP,
@@ -17,7 +18,6 @@ from linkevo.workers.repertoire_plots import (
     bin_columns,
     draw_paths,
     fold_bins,
-    is_map_elites,
     loss_norm,
     select_paths,
     space_of,
@@ -47,11 +47,6 @@ class ReportFigure:
     title: str
     caption: str
     figure: Figure
-
-
-def label(name: str) -> str:
-    """Returns the display label of an approach or fitness ("NSGA2" -> "NSGA-II")."""
-    return {"NSGA2": "NSGA-II", "Fp": "F_p", "Fsl": "F_sl"}.get(name, name)
 
 
 def merged_repertoire(grid: GridData, approach: str, fitness: str) -> pd.DataFrame:

@@ -9,10 +9,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.figures import label
-from linkevo.orchestrator.report.load import BASELINE, GridData
+from linkevo.orchestrator.report.load import GridData
 from linkevo.orchestrator.report.stats import ALPHA
-from linkevo.workers.repertoire_plots import is_map_elites, is_pareto
+from linkevo.sim.study import BASELINE, MULTI_OBJECTIVE, is_map_elites, is_pareto, label
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
@@ -106,7 +105,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
     """
     approaches = grid.approaches()
     maps = [a for a in approaches if is_map_elites(a)]
-    nsga = next((a for a in approaches if is_pareto(a)), "NSGA-II")
+    nsga = next((a for a in approaches if is_pareto(a)), MULTI_OBJECTIVE[0])
     study = tests[tests.family == "study"]
     findings = []
 

@@ -8,9 +8,9 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from linkevo.orchestrator.config import STUDY_EVALUATIONS
 from linkevo.orchestrator.report.findings import HOLDS, REPRODUCED, Finding
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG
+from linkevo.sim.study import STUDY_EVALUATIONS
 
 MIN_TRIALS_PER_CELL = 5
 """Below this many finished trials a cell's statistics are flagged as weak."""

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 from collections.abc import Iterable
@@ -14,24 +13,11 @@ from urllib.parse import unquote, urlparse
 import numpy as np
 import pandas as pd
 
-from linkevo.workers.trial import BEST_JSON
+from linkevo.orchestrator.config import ConfigError, from_dict
+from linkevo.sim.study import APPROACHES, FITNESSES, ordered
+from linkevo.workers import run_layout as layout
+from linkevo.workers.run_layout import BEST_JSON
 
-APPROACH_ORDER: tuple[str, ...] = (
-    "EA",
-    "NSGA-II",
-    "NSGA2",
-    "MAP-WH",
-    "MAP-LIS",
-    "MAP-ST",
-    "MAP-AU",
-    "RANDOM",
-)
-"""The approaches in report order: the study's six (the grid config spells NSGA-II, older
-runs NSGA2), then the RANDOM baseline."""
-BASELINE = "RANDOM"
-"""The random-sampling baseline: compared with each approach, apart from the study's own
-comparisons."""
-FITNESS_ORDER: tuple[str, ...] = ("Fp", "Fsl", "Fp2", "Fsl2")
 HISTORY_COLUMNS: tuple[str, ...] = (
     "iteration",
     "evaluations",
@@ -41,7 +27,7 @@ HISTORY_COLUMNS: tuple[str, ...] = (
     "qd_score",
     "hypervolume",
 )
-ARCHIVE_FILES: tuple[str, ...] = ("repertoire.parquet", "population.parquet")
+ARCHIVE_FILES: tuple[str, ...] = (layout.REPERTOIRE, layout.POPULATION)
 STATUS_MISSING = "MISSING"
 DOWNLOAD_THREADS = 8
 
@@ -58,7 +44,7 @@ class GridData:
         grid_id: the grid's id (tag `grid_id`).
         parent_run_id: the grid's parent run, where the report is logged.
         tracking_uri: the store it was read from.
-        config: the grid's resolved config (`grid_config.json`, else the parent's params).
+        config: the grid's resolved config (`grid_config.json`).
         trials: one row per trial (expected by the config or seen in MLflow), columns
             trial_key, approach, fitness, trial_index, seed, run_id, status (FINISHED,
             FAILED, KILLED, RUNNING or MISSING), error, best_loss (the best-ever loss, the
@@ -85,17 +71,11 @@ class GridData:
 
     def approaches(self) -> list[str]:
         """Returns the grid's approaches in the study's order."""
-        return ordered(self.trials.approach.unique(), APPROACH_ORDER)
+        return ordered(self.trials.approach.unique(), APPROACHES)
 
     def fitnesses(self) -> list[str]:
         """Returns the grid's fitness functions in the study's order."""
-        return ordered(self.trials.fitness.unique(), FITNESS_ORDER)
-
-
-def ordered(values: Iterable[str], order: tuple[str, ...]) -> list[str]:
-    """Returns the distinct `values`, known ones in `order` first, then the rest sorted."""
-    values = set(values)
-    return [v for v in order if v in values] + sorted(values - set(order))
+        return ordered(self.trials.fitness.unique(), FITNESSES)
 
 
 def in_study_order(
@@ -106,8 +86,8 @@ def in_study_order(
 ) -> pd.DataFrame:
     """Returns `frame`'s rows by approach and fitness in the study's order (`ordered`),
     then by the numeric column `then` when given; stable otherwise."""
-    approaches = ordered(frame[approach].fillna(""), APPROACH_ORDER)
-    fitnesses = ordered(frame[fitness].fillna(""), FITNESS_ORDER)
+    approaches = ordered(frame[approach].fillna(""), APPROACHES)
+    fitnesses = ordered(frame[fitness].fillna(""), FITNESSES)
     keys = {
         "_approach": frame[approach].fillna("").map(approaches.index),
         "_fitness": frame[fitness].fillna("").map(fitnesses.index),
@@ -126,23 +106,16 @@ def find_grid_run(client, grid_id: str | None, experiment: str) -> tuple[str, st
     exp = client.get_experiment_by_name(experiment)
     if exp is None:
         raise GridNotFoundError(f"no MLflow experiment {experiment!r} in this store")
-    query = "tags.`linkevo.kind` = 'grid'"
-    if grid_id is not None:
-        query += f" and tags.grid_id = '{grid_id}'"
-    runs = client.search_runs(
-        [exp.experiment_id], query, order_by=["attributes.start_time DESC"], max_results=1
-    )
+    runs = layout.grid_runs(client, exp.experiment_id, grid_id, limit=1)
     if not runs:
-        known = client.search_runs(
-            [exp.experiment_id], "tags.`linkevo.kind` = 'grid'", max_results=20
-        )
-        names = sorted({r.data.tags.get("grid_id", "?") for r in known})
+        known = layout.grid_runs(client, exp.experiment_id, limit=20)
+        names = sorted({r.data.tags.get(layout.GRID_ID, "?") for r in known})
         wanted = "any grid" if grid_id is None else f"grid {grid_id!r}"
         raise GridNotFoundError(
             f"no {wanted} in experiment {experiment!r}; known grids: {names or 'none'}"
         )
     run = runs[0]
-    return run.data.tags["grid_id"], run.info.run_id
+    return run.data.tags[layout.GRID_ID], run.info.run_id
 
 
 def load_grid(
@@ -193,37 +166,30 @@ def search_trial_runs(client, grid_id: str, experiment: str) -> pd.DataFrame:
     """Returns the grid's trial runs as `mlflow.search_runs` would, one row per run.
 
     Columns run_id, status, artifact_uri, start_time, `tags.<name>` and `metrics.<name>`
-    (last values). Built from `MlflowClient.search_runs` pages because the fluent
+    (last values). Built from `MlflowClient` searches because the fluent
     `mlflow.search_runs` reads the process-wide tracking URI, which a report must not
     change.
     """
     exp = client.get_experiment_by_name(experiment)
-    query = f"tags.`linkevo.kind` = 'trial' and tags.grid_id = '{grid_id}'"
-    records, token = [], None
-    while True:
-        page = client.search_runs([exp.experiment_id], query, max_results=1000, page_token=token)
-        for run in page:
-            record = {
-                "run_id": run.info.run_id,
-                "status": run.info.status,
-                "artifact_uri": run.info.artifact_uri,
-                "start_time": run.info.start_time,
-            }
-            record.update({f"tags.{k}": v for k, v in run.data.tags.items()})
-            record.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
-            records.append(record)
-        token = page.token
-        if not token:
-            break
+    records = []
+    for run in layout.trial_runs(client, exp.experiment_id, grid_id):
+        record = {
+            "run_id": run.info.run_id,
+            "status": run.info.status,
+            "artifact_uri": run.info.artifact_uri,
+            "start_time": run.info.start_time,
+        }
+        record.update({f"tags.{k}": v for k, v in run.data.tags.items()})
+        record.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
+        records.append(record)
     return pd.DataFrame.from_records(records)
 
 
 def _grid_config(parent, cache_dir: Path, tracking_uri: str) -> dict:
-    """Returns the parent run's `grid_config.json`, else its params as a flat dict."""
-    path = _artefact(parent.info.artifact_uri, "grid_config.json", cache_dir / "grid", tracking_uri)
-    if path is not None:
-        return json.loads(path.read_text())
-    return dict(parent.data.params)
+    """Returns the parent run's `grid_config.json` ({} when the run has none)."""
+    name = layout.GRID_CONFIG_JSON
+    path = _artefact(parent.info.artifact_uri, name, cache_dir / "grid", tracking_uri)
+    return json.loads(path.read_text()) if path is not None else {}
 
 
 def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
@@ -232,7 +198,7 @@ def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
         return pd.DataFrame(columns=["run_id", "status", "artifact_uri", "start_time"])
     runs = runs.assign(_done=(runs.status == "FINISHED").astype(int))
     runs = runs.sort_values(["_done", "start_time"], ascending=False)
-    runs = runs.drop_duplicates("tags.trial_key").drop(columns="_done")
+    runs = runs.drop_duplicates(f"tags.{layout.TRIAL_KEY}").drop(columns="_done")
     return runs.reset_index(drop=True)
 
 
@@ -314,14 +280,14 @@ def _trial_table(
     ]
     table = pd.DataFrame(
         {
-            "trial_key": tag("trial_key").astype(object),
-            "approach": tag("approach").astype(object),
-            "fitness": tag("fitness").astype(object),
-            "trial_index": pd.to_numeric(tag("trial_index"), errors="coerce"),
-            "seed": pd.to_numeric(tag("seed"), errors="coerce"),
+            "trial_key": tag(layout.TRIAL_KEY).astype(object),
+            "approach": tag(layout.APPROACH).astype(object),
+            "fitness": tag(layout.FITNESS).astype(object),
+            "trial_index": pd.to_numeric(tag(layout.TRIAL_INDEX), errors="coerce"),
+            "seed": pd.to_numeric(tag(layout.SEED), errors="coerce"),
             "run_id": runs.run_id.astype(object),
             "status": runs.status.astype(object),
-            "error": tag("error").astype(object),
+            "error": tag(layout.ERROR).astype(object),
             "best_loss": last("best_loss"),  # best-ever: the last value is the lowest
             "coverage": last("coverage"),
             "qd_score": last("qd_score"),
@@ -335,28 +301,12 @@ def _trial_table(
 
 
 def _expected_cells(config: dict) -> list[tuple[str, str, int]] | None:
-    """Returns the (approach, fitness, trial_index) cells the config asks for, if stated."""
-
-    def find(key: str):
-        if key in config:
-            return config[key]
-        for value in config.values():
-            if isinstance(value, dict) and key in value:
-                return value[key]
-        return None
-
-    def as_list(value):
-        # Params hold lists as their Python repr, e.g. "['EA', 'MAP-LIS']".
-        return ast.literal_eval(value) if isinstance(value, str) else value
-
+    """Returns the (approach, fitness, trial_index) cells the config asks for, if it parses."""
     try:
-        approaches, fitnesses = as_list(find("approaches")), as_list(find("fitnesses"))
-        trials = int(find("trials"))
-    except (TypeError, ValueError, SyntaxError):
+        cfg = from_dict(config, source=layout.GRID_CONFIG_JSON)
+    except (ConfigError, TypeError):
         return None
-    if not isinstance(approaches, list) or not isinstance(fitnesses, list):
-        return None
-    return [(a, f, i) for a in approaches for f in fitnesses for i in range(trials)]
+    return [(a, f, i) for a in cfg.approaches for f in cfg.fitnesses for i in range(cfg.trials)]
 
 
 def _add_missing(trials: pd.DataFrame, config: dict) -> pd.DataFrame:
@@ -367,7 +317,7 @@ def _add_missing(trials: pd.DataFrame, config: dict) -> pd.DataFrame:
     seen = set(zip(trials.approach, trials.fitness, trials.trial_index.astype(float), strict=True))
     rows = [
         {
-            "trial_key": f"{a}/{f}/{i:02d}",
+            "trial_key": layout.trial_key(a, f, i),
             "approach": a,
             "fitness": f,
             "trial_index": i,

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import mannwhitneyu
 
-from linkevo.orchestrator.report.load import APPROACH_ORDER, BASELINE, FITNESS_ORDER, ordered
+from linkevo.sim.study import APPROACHES, BASELINE, FITNESSES, ordered
 
 ALPHA = 0.05
 """Family-wise significance level of the Holm-corrected tests (per fitness)."""
@@ -62,8 +62,8 @@ def summary_table(trials: pd.DataFrame) -> pd.DataFrame:
         trials' best losses (NaN when none finished).
     """
     rows = []
-    for fitness in ordered(trials.fitness.unique(), FITNESS_ORDER):
-        for approach in ordered(trials.approach.unique(), APPROACH_ORDER):
+    for fitness in ordered(trials.fitness.unique(), FITNESSES):
+        for approach in ordered(trials.approach.unique(), APPROACHES):
             cell = trials[(trials.approach == approach) & (trials.fitness == fitness)]
             if cell.empty:
                 continue
@@ -123,10 +123,10 @@ def pairwise_tests(trials: pd.DataFrame) -> pd.DataFrame:
     """
     done = trials[(trials.status == "FINISHED") & trials.best_loss.notna()]
     frames = []
-    for fitness in ordered(done.fitness.unique(), FITNESS_ORDER):
+    for fitness in ordered(done.fitness.unique(), FITNESSES):
         groups = {
             a: done.best_loss[(done.fitness == fitness) & (done.approach == a)].to_numpy()
-            for a in ordered(done.approach[done.fitness == fitness].unique(), APPROACH_ORDER)
+            for a in ordered(done.approach[done.fitness == fitness].unique(), APPROACHES)
         }
         rows = []
         for a, b in combinations(groups, 2):

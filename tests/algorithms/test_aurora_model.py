@@ -8,7 +8,7 @@ import torch
 
 from linkevo.algorithms.aurora_model import PathAutoencoder
 from linkevo.algorithms.aurora_paths import prepare_paths, valid_rows
-from linkevo.algorithms.aurora_reference import reference_module, train_reference
+from tests.helpers.aurora_reference import reference_module, train_reference
 
 N_ANGLES = 40
 

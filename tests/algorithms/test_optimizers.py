@@ -7,17 +7,12 @@ import io
 import numpy as np
 import pytest
 
-from linkevo.algorithms import (
-    APPROACHES,
-    REPERTOIRE_APPROACHES,
-    MapElites,
-    make_optimizer,
-    scalar_loss,
-)
+from linkevo.algorithms import MapElites, make_optimizer, scalar_loss
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES
 from linkevo.sim.evaluate import evaluate
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import N_GENES
+from linkevo.sim.study import APPROACHES, REPERTOIRE_APPROACHES
 
 BUILT_IN = [a for a in APPROACHES if a != "MAP-AU"]
 N_ANGLES = 4

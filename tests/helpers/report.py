@@ -25,7 +25,7 @@ from linkevo.sim.linkage_doc import to_document
 
 N_GENES = 56
 N_ANGLES = 40
-FP_LEVEL = {"EA": 12.0, "NSGA-II": 7.0, "NSGA2": 7.0}
+FP_LEVEL = {"EA": 12.0, "NSGA2": 7.0}
 """Median final best loss with Fp per approach; MAP-Elites approaches use MAP_FP_LEVEL."""
 MAP_FP_LEVEL = 5.0
 FSL_LEVEL = -20.0
@@ -50,7 +50,7 @@ class GridSpec:
     """
 
     grid_id: str = "g0test"
-    approaches: tuple[str, ...] = ("EA", "NSGA-II", "MAP-WH", "MAP-ST")
+    approaches: tuple[str, ...] = ("EA", "NSGA2", "MAP-WH", "MAP-ST")
     fitnesses: tuple[str, ...] = ("Fp", "Fsl")
     trials: int = 4
     iterations: int = 6
@@ -103,7 +103,7 @@ def _history(rng, approach: str, final: float, spec: GridSpec) -> pd.DataFrame:
     coverage = np.linspace(0.05, 0.5, spec.iterations) * rng.uniform(0.8, 1.2)
     table["coverage"] = coverage
     table["qd_score"] = coverage * 10_000 * (100 - best)
-    if approach in ("NSGA-II", "NSGA2"):
+    if approach == "NSGA2":
         table["hypervolume"] = np.linspace(1.0, 2.0, spec.iterations)
     return table
 
@@ -140,7 +140,7 @@ def _archive(rng, approach: str, fitness: str, final: float, spec: GridSpec) -> 
     else:
         columns["cell"] = pa.array(np.full(n, -1, dtype=np.int64))
     columns["loss"] = pa.array(loss)
-    if approach in ("NSGA-II", "NSGA2"):
+    if approach == "NSGA2":
         share = rng.uniform(0.2, 0.8, n)
         columns["loss_0"] = pa.array(loss * share)
         columns["loss_1"] = pa.array(loss * (1 - share) + 0.1 * rng.random(n))

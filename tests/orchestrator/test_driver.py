@@ -13,9 +13,10 @@ from pathlib import Path
 import pytest
 from mlflow.tracking import MlflowClient
 
+from linkevo.orchestrator.commands.grid import summary
 from linkevo.orchestrator.config import ConfigError
-from linkevo.orchestrator.driver import launch, summary, trial_dir, work_root
-from linkevo.orchestrator.grid import CODE_VERSION_ENV
+from linkevo.orchestrator.driver import launch
+from linkevo.orchestrator.grid import CODE_VERSION_ENV, trial_dir, work_root
 from linkevo.workers.tracking import ensure_experiment
 from tests.helpers.grid import runs_by_key, tiny_grid
 

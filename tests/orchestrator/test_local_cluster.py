@@ -113,14 +113,14 @@ def test_a_grid_survives_a_stopped_worker_node_and_reads_back_through_the_server
 
 
 def test_down_leaves_no_process_or_port_behind(cluster: ClusterState) -> None:
-    from linkevo.orchestrator.local_cluster import _processes_using, _session_members
+    from linkevo.orchestrator.process_sessions import processes_using, session_members
 
     sessions = [n.sid for n in cluster.nodes] + [cluster.mlflow_sid]
-    assert all(_session_members(sid) for sid in sessions)
+    assert all(session_members(sid) for sid in sessions)
     stopped = down(Path(cluster.dir))
     assert stopped[-2:] == ["mlflow server", "postgresql"]
-    assert not [pid for sid in sessions for pid in _session_members(sid)]
-    assert not _processes_using(cluster.pg_data, cluster.ray_temp)
+    assert not [pid for sid in sessions for pid in session_members(sid)]
+    assert not processes_using(cluster.pg_data, cluster.ray_temp)
     for port in (cluster.postgres_port, cluster.mlflow_port, cluster.ray_port):
         with socket.socket() as probe:
             probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)

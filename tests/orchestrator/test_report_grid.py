@@ -6,7 +6,8 @@ import pandas as pd
 import pytest
 from mlflow.tracking import MlflowClient
 
-from linkevo.orchestrator.driver import launch, trial_dir, work_root
+from linkevo.orchestrator.driver import launch
+from linkevo.orchestrator.grid import trial_dir, work_root
 from linkevo.orchestrator.report import build_report
 from tests.helpers.grid import tiny_grid
 

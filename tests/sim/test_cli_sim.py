@@ -89,7 +89,7 @@ def test_eval_reads_a_user_target_file(linkevo, genome_file, tmp_path):
         (np.full((2, 55), 0.5), [], "shape (N, 56)"),
         (np.full((2, 56), 0.5), ["--target", "nowhere.json"], "neither a published target"),
         (np.zeros((0, 56)), [], "holds no genomes (shape (0, 56))"),
-        (np.full((2, 56), 0.5), ["--angles", "1"], "--angles must be >= 2, got 1"),
+        (np.full((2, 56), 0.5), ["--angles", "1"], "--angles must be >= 3, got 1"),
     ],
 )
 def test_eval_refuses_bad_input_before_work(linkevo, tmp_path, content, args, message):
@@ -121,11 +121,11 @@ def test_show_draws_png_and_gif_from_npy_and_json(linkevo, genome_file, tmp_path
     assert bad.returncode == 2 and "999" in bad.stderr
 
 
-@pytest.mark.parametrize("angles", ["0", "1"])
-def test_show_refuses_fewer_than_two_angles(linkevo, genome_file, tmp_path, angles):
+@pytest.mark.parametrize("angles", ["0", "2"])
+def test_show_refuses_fewer_than_three_angles(linkevo, genome_file, tmp_path, angles):
     out = tmp_path / "l.png"
     path, _ = genome_file
     done = linkevo("show", str(path), "--angles", angles, "--out", str(out), cwd=tmp_path)
     assert done.returncode == 2
-    assert f"--angles must be >= 2, got {angles}" in done.stderr and "Traceback" not in done.stderr
+    assert f"--angles must be >= 3, got {angles}" in done.stderr and "Traceback" not in done.stderr
     assert not out.exists()

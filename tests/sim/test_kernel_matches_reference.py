@@ -84,7 +84,7 @@ def test_evaluate_equals_reference_for_d24_and_user_targets(random_set, mode):
             assert_same("loss", kernel.loss, ref.loss, genomes)
 
 
-@pytest.mark.parametrize("n_angles", [2, 7, 64])
+@pytest.mark.parametrize("n_angles", [3, 7, 64])
 def test_evaluate_equals_reference_at_other_angle_counts(mutated_set, n_angles):
     genomes = mutated_set[:200]
     for mode in sim.MODES:

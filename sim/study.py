@@ -1,0 +1,126 @@
+"""The study's vocabulary: its approaches and fitnesses (names, labels, order, flags) and its
+defaults.
+
+Every layer that names an approach or a fitness reads it from here, so each has one
+spelling: the `name` is what configs, the command line, MLflow tags and tables use; the
+`label` is how a figure captions it (the paper's spelling). Tuples are in the study's
+order, which reports and tables follow.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class Approach:
+    """One search approach.
+
+    Attributes:
+        name: the spelling in configs, tags and tables ("NSGA2").
+        label: the spelling in figures ("NSGA-II").
+        family: "population" (EA, NSGA-II), "map-elites" or "baseline" (random sampling).
+        multi_objective: optimises the two-objective variant of its fitness.
+    """
+
+    name: str
+    label: str
+    family: str
+    multi_objective: bool = False
+
+    @property
+    def repertoire(self) -> bool:
+        """Keeps a repertoire (an archive on a grid) rather than a population."""
+        return self.family != "population"
+
+
+@dataclass(frozen=True)
+class Fitness:
+    """One fitness function a trial optimises.
+
+    Attributes:
+        name: the spelling in configs, tags and tables ("Fp").
+        label: the spelling in figures ("F_p").
+        two_objective: the variant a multi-objective approach evaluates ("Fp2").
+    """
+
+    name: str
+    label: str
+    two_objective: str
+
+
+APPROACH_TABLE: tuple[Approach, ...] = (
+    Approach("EA", "EA", "population"),
+    Approach("NSGA2", "NSGA-II", "population", multi_objective=True),
+    Approach("MAP-WH", "MAP-WH", "map-elites"),
+    Approach("MAP-LIS", "MAP-LIS", "map-elites"),
+    Approach("MAP-ST", "MAP-ST", "map-elites"),
+    Approach("MAP-AU", "MAP-AU", "map-elites"),
+    Approach("RANDOM", "RANDOM", "baseline"),
+)
+FITNESS_TABLE: tuple[Fitness, ...] = (
+    Fitness("Fp", "F_p", "Fp2"),
+    Fitness("Fsl", "F_sl", "Fsl2"),
+)
+
+APPROACH: dict[str, Approach] = {a.name: a for a in APPROACH_TABLE}
+APPROACHES: tuple[str, ...] = tuple(APPROACH)
+"""Every approach: the study's six and the RANDOM baseline."""
+MAP_ELITES: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.family == "map-elites")
+"""The MAP-Elites approaches of the study (each with its own descriptor grid)."""
+STUDY_APPROACHES: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.family != "baseline")
+"""The study's six approaches."""
+BASELINE = "RANDOM"
+"""The random-sampling baseline, compared with each approach beside the study's own pairs."""
+REPERTOIRE_APPROACHES: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.repertoire)
+"""Approaches that keep a repertoire rather than a population."""
+MULTI_OBJECTIVE: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.multi_objective)
+"""Approaches that optimise the two-objective variant of their fitness."""
+
+FITNESS: dict[str, Fitness] = {f.name: f for f in FITNESS_TABLE}
+SINGLE_FITNESSES: tuple[str, ...] = tuple(FITNESS)
+"""The fitness functions a trial optimises ("Fp", "Fsl")."""
+FITNESSES: tuple[str, ...] = (*SINGLE_FITNESSES, *(f.two_objective for f in FITNESS_TABLE))
+"""Every fitness `sim.evaluate` computes: the two and their two-objective variants."""
+MODES: tuple[str, ...] = ("paper", "legacy")
+"""The simulation's modes (spec: paper by default, legacy as the published code)."""
+TARGETS: tuple[str, ...] = ("D16", "D24")
+"""The published target paths a fitness can be measured against (or a file)."""
+
+STUDY_EVALUATIONS = 726_750
+"""Evaluations per trial in the study (one hour on 16 CPUs, spec §6); whole batches of
+5,000 make it 725,000."""
+DEFAULT_BATCH = 5000
+"""Genomes asked for and evaluated per iteration (the study's batch)."""
+DEFAULT_ANGLES = 40
+"""Crank angles simulated per turn (the study's 40)."""
+MIN_ANGLES = 3
+"""The fewest crank angles a trial accepts: a path needs three points to have a shape."""
+
+
+def label(name: str) -> str:
+    """Returns the figure label of an approach or fitness name ("NSGA2" -> "NSGA-II")."""
+    item = APPROACH.get(name) or FITNESS.get(name)
+    return item.label if item else name
+
+
+def is_map_elites(approach: str) -> bool:
+    """Returns True for the MAP-Elites approaches."""
+    return approach in MAP_ELITES
+
+
+def is_pareto(approach: str) -> bool:
+    """Returns True for the multi-objective approach (NSGA-II)."""
+    return approach in MULTI_OBJECTIVE
+
+
+def evaluated_fitness(fitness: str, multi_objective: bool) -> str:
+    """Returns the `sim.evaluate` fitness behind `fitness`: its two-objective variant for a
+    multi-objective approach, else itself."""
+    return FITNESS[fitness].two_objective if multi_objective else fitness
+
+
+def ordered(names, order: tuple[str, ...]) -> list[str]:
+    """Returns `names` in the study's `order`, unknown names last in sorted order."""
+    names = set(names)
+    return [n for n in order if n in names] + sorted(n for n in names - set(order))

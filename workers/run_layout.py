@@ -1,0 +1,150 @@
+"""The MLflow run layout: how linkevo's runs are tagged, named and found.
+
+A grid is a parent run (kind "grid"); each trial is a nested run (kind "trial") tagged with
+its grid id and trial key; a field trial, real or simulated, is a run of kind
+"field_trial". Every module that writes or reads runs takes the names from here and
+searches through `search`, which pages through all results and quotes every value it puts
+in a filter (`docs/grid.md` shows the layout).
+"""
+
+from __future__ import annotations
+
+import re
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from mlflow.entities import Run
+    from mlflow.tracking import MlflowClient
+
+KIND = "linkevo.kind"
+"""The tag every linkevo run carries: one of the kinds below."""
+GRID, TRIAL, FIELD_TRIAL = "grid", "trial", "field_trial"
+PARENT = "mlflow.parentRunId"
+NOTE = "mlflow.note.content"
+GRID_ID = "grid_id"
+TRIAL_KEY = "trial_key"
+TRIAL_INDEX = "trial_index"
+APPROACH = "approach"
+FITNESS = "fitness"
+SEED = "seed"
+CODE_VERSION = "code_version"
+HOST = "host"
+RAY_NODE = "ray_node"
+TRIAL_TAGS: tuple[str, str, str] = (APPROACH, FITNESS, TRIAL_INDEX)
+"""The tags that place a trial in the study's order."""
+ERROR = "error"
+"""A failed run's message (its first `ERROR_CHARS` characters)."""
+ERROR_CHARS = 500
+STOPPED_BY = "stopped_by"
+"""How a trial ended: "budget", or "max_seconds" when its time limit cut it short."""
+
+GRID_CONFIG_JSON = "grid_config.json"
+GRID_CONFIG_TOML = "grid_config.toml"
+BEST_JSON = "best_linkage.json"
+"""A trial's best linkage, as `sim.linkage_doc` writes it."""
+REPERTOIRE = "repertoire.parquet"
+POPULATION = "population.parquet"
+
+ID_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
+"""What a run id or grid id a user types may hold (a grid id is 12 hex digits)."""
+_KEY = re.compile(r"(?P<approach>[A-Za-z0-9_-]+)/(?P<fitness>[A-Za-z0-9_]+)/(?P<index>\d{2,})")
+_SAFE = re.compile(r"[A-Za-z0-9_./:+-]*")
+PAGE = 1000
+"""Runs per search page (MLflow's SQL stores accept up to 50,000)."""
+
+
+def trial_key(approach: str, fitness: str, index: int) -> str:
+    """Returns the trial key, e.g. "MAP-LIS/Fp/03": unique in a grid, stable across runs."""
+    return f"{approach}/{fitness}/{index:02d}"
+
+
+def parse_trial_key(key: str) -> tuple[str, str, int]:
+    """Returns (approach, fitness, index) of a trial key.
+
+    Raises:
+        ValueError: naming the key and the allowed form.
+    """
+    found = _KEY.fullmatch(key)
+    if found is None:
+        raise ValueError(f"trial key {key!r}: allowed APPROACH/FITNESS/NN, e.g. MAP-LIS/Fp/03")
+    return found["approach"], found["fitness"], int(found["index"])
+
+
+def quote(value: str) -> str:
+    """Returns `value` as a quoted literal for an MLflow filter string.
+
+    MLflow's filter grammar has no escape for a quote inside a literal, so a value holding
+    anything beyond letters, digits and `_ . / : + -` is refused: a tag read back from a
+    shared store cannot change what a search means.
+
+    Raises:
+        ValueError: naming the value and the allowed characters.
+    """
+    if not _SAFE.fullmatch(value):
+        raise ValueError(
+            f"{value!r} cannot be searched for: allowed letters, digits and _ . / : + -"
+        )
+    return f"'{value}'"
+
+
+def where(kind: str | None = None, status: str | None = None, **tags: str) -> str:
+    """Returns a filter string: the run kind, a run status and tags equal to values."""
+    clauses = [f"tags.`{KIND}` = {quote(kind)}"] if kind else []
+    clauses += [f"tags.`{name}` = {quote(value)}" for name, value in tags.items()]
+    if status:
+        clauses.append(f"attributes.status = {quote(status)}")
+    return " and ".join(clauses)
+
+
+def search(
+    client: MlflowClient,
+    experiment_ids: list[str],
+    filter_string: str,
+    *,
+    order_by: list[str] | None = None,
+    limit: int | None = None,
+) -> list[Run]:
+    """Returns every run matching `filter_string` (or the first `limit`), page by page."""
+    runs: list[Run] = []
+    token = None
+    while limit is None or len(runs) < limit:
+        size = PAGE if limit is None else min(PAGE, limit - len(runs))
+        page = client.search_runs(
+            experiment_ids, filter_string, order_by=order_by, max_results=size, page_token=token
+        )
+        runs.extend(page)
+        token = page.token
+        if not token:
+            break
+    return runs
+
+
+def trial_runs(
+    client: MlflowClient,
+    experiment_id: str,
+    grid_id: str,
+    *,
+    trial_key: str | None = None,
+    status: str | None = None,
+) -> list[Run]:
+    """Returns the grid's trial runs, optionally of one trial key and/or one status."""
+    tags = {GRID_ID: grid_id} | ({TRIAL_KEY: trial_key} if trial_key is not None else {})
+    return search(client, [experiment_id], where(TRIAL, status, **tags))
+
+
+def grid_runs(
+    client: MlflowClient,
+    experiment_id: str,
+    grid_id: str | None = None,
+    *,
+    limit: int | None = None,
+) -> list[Run]:
+    """Returns the grid runs (of one grid id when given), the latest started first."""
+    tags = {GRID_ID: grid_id} if grid_id is not None else {}
+    return search(
+        client,
+        [experiment_id],
+        where(GRID, **tags),
+        order_by=["attributes.start_time DESC"],
+        limit=limit,
+    )
