@@ -45,8 +45,8 @@ from linkevo.orchestrator import config  # noqa: E402
 from linkevo.orchestrator.driver import trial_specs  # noqa: E402
 from linkevo.orchestrator.grid import Grid  # noqa: E402
 from linkevo.orchestrator.local_cluster import ClusterSettings, down, up  # noqa: E402
-from linkevo.workers.run_layout import trial_runs  # noqa: E402
-from linkevo.workers.tracking import ensure_experiment  # noqa: E402
+from linkevo.workers.store.run_layout import trial_runs  # noqa: E402
+from linkevo.workers.store.tracking import ensure_experiment  # noqa: E402
 from linkevo.workers.trial_task import TrialJob, run_trial_job  # noqa: E402
 
 TINY = {
@@ -100,9 +100,7 @@ def run_grid(cfg: Path, uri: str, db_uri: str, work: Path) -> None:
         print(done.stdout[-1500:], done.stderr[-1500:])
     client = MlflowClient(uri)
     experiment = client.get_experiment_by_name(grid.config.experiment)
-    runs = client.search_runs([experiment.experiment_id],
-                              f"tags.grid_id = '{grid.grid_id}' and tags.`linkevo.kind` = 'trial'",
-                              max_results=50_000)  # fmt: skip
+    runs = trial_runs(client, experiment.experiment_id, grid.grid_id)
     span = (max(r.info.end_time for r in runs) - min(r.info.start_time for r in runs)) / 1e3
     after = row_counts(db_uri)
     rows = {t: after[t] - before[t] for t in TABLES}

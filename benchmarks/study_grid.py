@@ -25,7 +25,8 @@ from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.config import load
 from linkevo.orchestrator.reservation import Cluster, Reservation
-from linkevo.workers.tracking import resolve_tracking_uri
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.tracking import resolve_tracking_uri
 
 ROOT = Path(__file__).resolve().parents[1]
 SEVEN = '["EA","NSGA2","MAP-WH","MAP-LIS","MAP-ST","MAP-AU","RANDOM"]'
@@ -64,15 +65,9 @@ def main() -> None:
         grid_id = args.grid_id or run_grid(args, Path(tmp))
         client = MlflowClient(uri)
         experiment = client.get_experiment_by_name("linkevo").experiment_id
-        (parent,) = client.search_runs(
-            [experiment], f"tags.grid_id = '{grid_id}' and tags.`linkevo.kind` = 'grid'"
-        )
-        trials = client.search_runs(
-            [experiment],
-            f"tags.grid_id = '{grid_id}' and tags.`linkevo.kind` = 'trial'",
-            max_results=10_000,
-        )
-        config_path = client.download_artifacts(parent.info.run_id, "grid_config.toml", tmp)
+        (parent,) = layout.grid_runs(client, experiment, grid_id)
+        trials = layout.trial_runs(client, experiment, grid_id)
+        config_path = client.download_artifacts(parent.info.run_id, layout.GRID_CONFIG_TOML, tmp)
         config = load(config_path)
     seconds = {r: (r.info.end_time - r.info.start_time) / 1000 for r in trials if r.info.end_time}
     wall = (parent.info.end_time - parent.info.start_time) / 1000

@@ -20,9 +20,9 @@ import numpy as np
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.session import run_walk
 from linkevo.sim.study import MAP_ELITES
-from linkevo.workers import run_layout as layout
-from linkevo.workers.linkages import SourceLinkage
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.linkages import SourceLinkage
+from linkevo.workers.store.tracking import ensure_experiment
 
 ROBOTS = ("first", "modified")
 REAL, EMULATOR, PHYSICS = "False", "True", "physics"

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from linkevo.hardware import control_table as ct
 from linkevo.hardware.bus import Status
-from linkevo.workers.artifacts import atomic_path
+from linkevo.workers.store.artifacts import atomic_path
 
 
 @dataclass(frozen=True)
@@ -52,7 +52,7 @@ def row(record: TickRecord, motor_ids: list[int]) -> list[str]:
 
 class TelemetryWriter:
     """Streams rows to a temp file beside `path` and moves it into place on close
-    (`workers.artifacts.atomic_path`: fsynced, readable as the umask allows).
+    (`workers.store.artifacts.atomic_path`: fsynced, readable as the umask allows).
 
     Closing also happens after an error or a stop, so a partial walk keeps its rows; a
     walk that never ticked (a bad port, a missing motor) leaves an existing `path` as it

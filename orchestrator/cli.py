@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     """Runs the CLI and returns the process exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    from linkevo.workers.tracking import TrackingUriError
+    from linkevo.workers.store.tracking import TrackingUriError
 
     try:
         return int(args.func(args) or 0)

@@ -29,8 +29,8 @@ from linkevo.orchestrator.grid_run import log_cell_summaries, parent_run
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, warm_kernels
 from linkevo.orchestrator.reservation import Cluster, Reservation
-from linkevo.workers import run_layout as layout
-from linkevo.workers.tracking import ensure_experiment, resolve_tracking_uri
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
 

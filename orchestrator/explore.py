@@ -37,8 +37,8 @@ from linkevo.sim.descriptors import DESCRIPTOR_SPACES
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES, REPERTOIRE_APPROACHES
-from linkevo.workers import run_layout as layout
-from linkevo.workers.artifacts import write_bytes_atomic
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.artifacts import write_bytes_atomic
 
 PAGE_ARTIFACT = "explorer.html"
 """The page's name among a run's artefacts (a trial's run, or a grid's parent run)."""
@@ -258,7 +258,7 @@ def explore(
         log_to: a run id to log the page to as `explorer.html` (None: do not log).
         progress: called with (trials done, trial) after each trial is read.
     """
-    from linkevo.workers.linkages import repertoire
+    from linkevo.workers.store.linkages import repertoire
 
     views = []
     with tempfile.TemporaryDirectory(prefix="linkevo-explore-") as tmp:

@@ -16,7 +16,7 @@ from mlflow.tracking import MlflowClient
 from linkevo.orchestrator.grid import Grid, TrialCell, trial_dir
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.reservation import Reservation
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialJob, TrialOutcome, end_run
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.orchestrator.config import GridConfig
-from linkevo.workers.run_layout import trial_key
+from linkevo.workers.store.run_layout import trial_key
 
 _REPO_ROOT = Path(__file__).resolve().parent.parent
 CODE_VERSION_ENV = "LINKEVO_CODE_VERSION"

@@ -12,7 +12,7 @@ from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.config import GridConfig, flatten, to_toml
 from linkevo.orchestrator.grid import Grid
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 from linkevo.workers.trial_task import TrialOutcome
 
 

@@ -42,7 +42,7 @@ from linkevo.orchestrator.process_sessions import (
     spawn,
     stop_session,
 )
-from linkevo.workers.artifacts import write_json_atomic, write_text_atomic
+from linkevo.workers.store.artifacts import write_json_atomic, write_text_atomic
 
 STATE_FILE = "cluster.json"
 TOKEN_FILE = "ray_auth_token"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, TextIO
 
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 
 if TYPE_CHECKING:
     from linkevo.orchestrator.fan_out import TrialContext

@@ -12,10 +12,10 @@ import numpy as np
 from linkevo.sim.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.physical import TOGGLE_DEG
 from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES
-from linkevo.workers.artifacts import write_json_atomic, write_text_atomic
-from linkevo.workers.build_drawings import draw_layers, draw_path_overlay, draw_template
-from linkevo.workers.drawing import draw_linkage
-from linkevo.workers.linkages import SourceLinkage
+from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
+from linkevo.workers.plots.linkage import draw_linkage
+from linkevo.workers.store.artifacts import write_json_atomic, write_text_atomic
+from linkevo.workers.store.linkages import SourceLinkage
 
 SHEET_COLUMNS = (
     "beam",

@@ -14,7 +14,7 @@ from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.robot import LEG_SLOTS, floor
 from linkevo.sim.walk import Walk, WalkSettings, field_trials, summary
-from linkevo.workers.linkages import SourceLinkage
+from linkevo.workers.store.linkages import SourceLinkage
 
 if TYPE_CHECKING:
     from linkevo.hardware.config import RobotConfig
@@ -124,12 +124,12 @@ def simulate_source(
 
 def write_pictures(walk: Walk, out: Path, title: str) -> list[Path]:
     """Writes the first walk's pictures into out: walk.gif (its first 4 s), walk.png,
-    path.png and contacts.png (`workers.walk_drawings`); returns their paths.
+    path.png and contacts.png (`workers.plots.walk`); returns their paths.
 
     Raises:
         RuntimeError: when MuJoCo cannot render (no OpenGL), saying what to install.
     """
-    from linkevo.workers import walk_drawings as draw
+    from linkevo.workers.plots import walk as draw
 
     out.mkdir(parents=True, exist_ok=True)
     try:

@@ -30,9 +30,9 @@ from linkevo.orchestrator.simulate import log_simulated, simulate_source
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.robot import FLOORS
 from linkevo.sim.study import MAP_ELITES
-from linkevo.workers import run_layout as layout
-from linkevo.workers.linkages import LinkageRef, SourceLinkage, load_source, repertoire
-from linkevo.workers.repertoire_plots import select_paths
+from linkevo.workers.plots.repertoire import select_paths
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.linkages import LinkageRef, SourceLinkage, load_source, repertoire
 
 FITNESS = "Fp"
 """The study built robots from F_p repertoires only."""

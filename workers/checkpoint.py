@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from linkevo.workers.artifacts import read_npz, write_npz_atomic
+from linkevo.workers.store.artifacts import read_npz, write_npz_atomic
 
 CHECKPOINT_FILE = "state.npz"
 """The checkpoint file inside a trial's `checkpoint/` folder."""

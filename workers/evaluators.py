@@ -13,7 +13,7 @@ from linkevo.sim.evaluate import evaluate
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.fitness import N_OBJECTIVES, Target, named_target
 from linkevo.sim.study import DEFAULT_ANGLES, TARGETS
-from linkevo.workers.result_pool import MemoryBuffer, ResultPool
+from linkevo.workers.result_pool import ResultPool
 
 Pending = Callable[[], Evaluation]
 """A submitted batch: calling it waits for and returns its Evaluation."""
@@ -74,8 +74,7 @@ class LocalEvaluator:
         self.mode = mode
         self.target = resolve_target(target)
         self.n_angles = n_angles
-        shape = (n_angles, N_OBJECTIVES.get(fitness, 1))
-        self._buffers = ResultPool(lambda n: MemoryBuffer(n, *shape))
+        self._buffers = ResultPool(n_angles, N_OBJECTIVES.get(fitness, 1))
 
     def __call__(self, genomes: np.ndarray, out: Evaluation | None = None) -> Evaluation:
         """Returns the evaluation of genomes (B, 56), written into `out` when given."""

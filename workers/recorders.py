@@ -12,8 +12,8 @@ from typing import Protocol
 
 from tqdm import tqdm
 
-from linkevo.workers.artifacts import write_text_atomic
 from linkevo.workers.checkpoint import checkpointed_rows
+from linkevo.workers.store.artifacts import write_text_atomic
 
 
 class Recorder(Protocol):

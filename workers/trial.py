@@ -23,13 +23,13 @@ from linkevo.sim.study import (
     REPERTOIRE_APPROACHES,
     SINGLE_FITNESSES,
 )
-from linkevo.workers.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
 from linkevo.workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
-from linkevo.workers.drawing import draw_linkage
 from linkevo.workers.evaluators import Evaluator, resolve_target
+from linkevo.workers.plots.linkage import draw_linkage
+from linkevo.workers.plots.repertoire import draw_trial_maps
 from linkevo.workers.recorders import MetricsCsv, Recorder
-from linkevo.workers.repertoire_plots import draw_trial_maps
-from linkevo.workers.run_layout import BEST_JSON
+from linkevo.workers.store.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
+from linkevo.workers.store.run_layout import BEST_JSON
 
 CHECKPOINT_DIR = "checkpoint"
 METRICS_FILE = "metrics.csv"

@@ -15,10 +15,10 @@ import ray
 from mlflow.entities import Param, Run
 from mlflow.tracking import MlflowClient
 
-from linkevo.workers import run_layout as layout
 from linkevo.workers.evaluators import LocalEvaluator
-from linkevo.workers.mlflow_recorder import MlflowRecorder
 from linkevo.workers.ray_evaluator import ActorPoolEvaluator
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.trial import TrialSpec, run_trial
 
 """How much of a failure message the `error` tag keeps."""

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -63,7 +63,7 @@ def handle(args: argparse.Namespace) -> int:
         trial_run,
     )
     from linkevo.orchestrator.report.load import GridNotFoundError, find_grid_run
-    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     if not layout.ID_PATTERN.fullmatch(args.ref):  # it goes into an MLflow filter string
         raise CliError(

@@ -99,7 +99,7 @@ def run_grid(args: argparse.Namespace) -> int:
     from linkevo.orchestrator import driver
     from linkevo.orchestrator.fan_out import GridInterrupted
     from linkevo.orchestrator.ray_connection import dry_run_cluster
-    from linkevo.workers.tracking import resolve_tracking_uri
+    from linkevo.workers.store.tracking import resolve_tracking_uri
 
     if args.dry_run:
         driver.trial_specs(grid)  # refuses what the launch would refuse
@@ -141,14 +141,18 @@ def _resume_command(args: argparse.Namespace) -> str:
 
 
 def _ui_flag(uri: str) -> str:
-    from linkevo.workers.tracking import default_tracking_uri
+    from linkevo.workers.store.tracking import default_tracking_uri
 
     return "" if uri == default_tracking_uri() else f" --tracking-uri '{uri}'"
 
 
 def run_ui(args: argparse.Namespace) -> int:
     """Runs `mlflow ui` on the store, bound to 127.0.0.1, until interrupted."""
-    from linkevo.workers.tracking import artifact_root_for, require_store, resolve_tracking_uri
+    from linkevo.workers.store.tracking import (
+        artifact_root_for,
+        require_store,
+        resolve_tracking_uri,
+    )
 
     uri = resolve_tracking_uri(args.tracking_uri)
     if uri.startswith(("http://", "https://")):

@@ -198,8 +198,8 @@ def trial_handler(args: argparse.Namespace) -> int:
 
     from linkevo.hardware.errors import HardwareError, StopRequested
     from linkevo.hardware.field_trial import ROBOTS, log_field_trial, walk_repeats
-    from linkevo.workers.linkages import LinkageError, LinkageRef, load_source
-    from linkevo.workers.tracking import resolve_tracking_uri
+    from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.store.tracking import resolve_tracking_uri
 
     if args.robot not in ROBOTS:
         raise CliError(f"--robot {args.robot!r}: allowed {', '.join(ROBOTS)}")
@@ -269,7 +269,7 @@ def trial_handler(args: argparse.Namespace) -> int:
 def table_handler(args: argparse.Namespace) -> int:
     """Prints the field-trial means in the study's Table I layout."""
     from linkevo.hardware.field_trial import FieldTrialError, trial_table
-    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:

@@ -71,8 +71,8 @@ def _simulation_source(args: argparse.Namespace):
     from mlflow.tracking import MlflowClient
 
     from linkevo.orchestrator.simulate import document_source
-    from linkevo.workers.linkages import LinkageError, LinkageRef, load_source
-    from linkevo.workers.tracking import ensure_experiment, resolve_tracking_uri
+    from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 
     uri = resolve_tracking_uri(args.tracking_uri)
     path = Path(args.linkage)
@@ -128,8 +128,8 @@ def study_handler(args: argparse.Namespace) -> int:
     from mlflow.tracking import MlflowClient
 
     from linkevo.orchestrator.walk_study import predict_table_one
-    from linkevo.workers.artifacts import write_text_atomic
-    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.artifacts import write_text_atomic
+    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     if not math.isfinite(args.seconds) or not 0 < args.seconds <= MAX_SIM_SECONDS:
         raise CliError(f"--seconds {args.seconds}: allowed a number in (0, {MAX_SIM_SECONDS:g}]")

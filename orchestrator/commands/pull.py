@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -104,8 +104,8 @@ def handle(args: argparse.Namespace) -> int:
     from mlflow.tracking import MlflowClient
 
     from linkevo.orchestrator.pull import pull
-    from linkevo.workers.linkages import LinkageError, LinkageRef, load_source
-    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
     text = args.ref
@@ -135,7 +135,7 @@ def handle(args: argparse.Namespace) -> int:
 
 def _print_cells(client, ref, top: int, buildable: bool) -> int:
     """Prints a run's best repertoire cells with their checks (`linkevo pull RUN --list`)."""
-    from linkevo.workers.linkages import list_cells
+    from linkevo.workers.store.linkages import list_cells
 
     if top < 1:
         raise CliError(f"--list {top}: give the number of cells to list, >= 1")

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 
 """What a grid id may hold (it goes into an MLflow filter string)."""
 
@@ -65,7 +65,7 @@ def _store_options(parser: argparse.ArgumentParser) -> None:
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
     from linkevo.orchestrator.report import GridNotFoundError, build_report
-    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     if args.grid_id is not None and not layout.ID_PATTERN.fullmatch(args.grid_id):
         raise CliError(
@@ -97,8 +97,8 @@ def compare_handler(args: argparse.Namespace) -> int:
     """Prints the two grids' comparison table (and writes it as CSV with --out)."""
     from linkevo.orchestrator.report import GridNotFoundError
     from linkevo.orchestrator.report.compare import compare_grids
-    from linkevo.workers.artifacts import write_text_atomic
-    from linkevo.workers.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.artifacts import write_text_atomic
+    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     for grid in (args.grid_a, args.grid_b):
         if not layout.ID_PATTERN.fullmatch(grid):

@@ -11,7 +11,7 @@ import numpy as np
 from linkevo.orchestrator.cli import CliError
 from linkevo.sim.genome import GenomeError, validate_genomes
 from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, MIN_ANGLES, MODES
-from linkevo.workers.drawing import SUFFIXES
+from linkevo.workers.plots.linkage import SUFFIXES
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -86,8 +86,8 @@ def check_angles(angles: int) -> None:
 def run_eval(args: argparse.Namespace) -> int:
     """Handles `linkevo eval`."""
     from linkevo.sim.evaluate import evaluate
-    from linkevo.workers.artifacts import write_npz_atomic
     from linkevo.workers.evaluators import resolve_target
+    from linkevo.workers.store.artifacts import write_npz_atomic
 
     genomes = load_genomes(args.genomes)
     check_writable(args.out, (".npz",))
@@ -119,7 +119,7 @@ def run_eval(args: argparse.Namespace) -> int:
 def run_show(args: argparse.Namespace) -> int:
     """Handles `linkevo show`."""
     from linkevo.sim.linkage_doc import from_document
-    from linkevo.workers.drawing import draw_linkage
+    from linkevo.workers.plots.linkage import draw_linkage
 
     check_writable(args.out, SUFFIXES)
     check_angles(args.angles)

@@ -17,7 +17,7 @@ from linkevo.orchestrator.report.findings import Finding, check_findings
 from linkevo.orchestrator.report.html import render_html
 from linkevo.orchestrator.report.load import GridData, load_grid
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
-from linkevo.workers.artifacts import write_bytes_atomic
+from linkevo.workers.store.artifacts import write_bytes_atomic
 
 REPORT_ARTIFACT_DIR = "report"
 """Where the report lands among the grid parent run's artefacts."""

@@ -11,7 +11,7 @@ from matplotlib.figure import Figure
 from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.study import is_map_elites, label
-from linkevo.workers.repertoire_plots import (
+from linkevo.workers.plots.repertoire import (
     DOWNSAMPLED,
     LOSS_CMAP,
     STRIP_PATHS,

@@ -15,8 +15,8 @@ import pandas as pd
 
 from linkevo.orchestrator.config import ConfigError, from_dict
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
-from linkevo.workers import run_layout as layout
-from linkevo.workers.run_layout import BEST_JSON
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.run_layout import BEST_JSON
 
 HISTORY_COLUMNS: tuple[str, ...] = (
     "iteration",

@@ -13,8 +13,8 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.cli import main
-from linkevo.workers.linkages import LinkageError, LinkageRef
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.linkages import LinkageError, LinkageRef
+from linkevo.workers.store.tracking import ensure_experiment
 
 BEST_DOC = {"format": "test/1", "genome": [0.5] * 56, "note": "opaque to hardware/"}
 

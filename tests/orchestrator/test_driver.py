@@ -17,7 +17,7 @@ from linkevo.orchestrator.commands.grid import summary
 from linkevo.orchestrator.config import ConfigError
 from linkevo.orchestrator.driver import launch
 from linkevo.orchestrator.grid import CODE_VERSION_ENV, trial_dir, work_root
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.tracking import ensure_experiment
 from tests.helpers.grid import runs_by_key, tiny_grid
 
 pytestmark = pytest.mark.ray

@@ -21,9 +21,9 @@ from linkevo.orchestrator.explore import TrialRun, repertoire_view
 from linkevo.sim import decode, simulate
 from linkevo.sim.physical import physical_checks
 from linkevo.workers.evaluators import LocalEvaluator
-from linkevo.workers.linkages import repertoire
-from linkevo.workers.mlflow_recorder import MlflowRecorder
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.linkages import repertoire
+from linkevo.workers.store.mlflow_recorder import MlflowRecorder
+from linkevo.workers.store.tracking import ensure_experiment
 from linkevo.workers.trial import TrialSpec, run_trial
 from linkevo.workers.trial_task import SPEC_PARAMS
 

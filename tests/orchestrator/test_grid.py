@@ -17,7 +17,7 @@ import pytest
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.config import GridConfig
 from linkevo.orchestrator.grid import Grid, trial_seed
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.tracking import ensure_experiment
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 

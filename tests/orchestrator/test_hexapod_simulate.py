@@ -14,8 +14,8 @@ from linkevo import sim
 from linkevo.orchestrator.cli import main
 from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.linkage_doc import to_document
-from linkevo.workers.artifacts import write_json_atomic, write_parquet_atomic
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
+from linkevo.workers.store.tracking import ensure_experiment
 
 GRID = "abcdef012345"
 

@@ -14,8 +14,8 @@ from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.pull import build_sheet
 from linkevo.sim.linkage_doc import FORMAT, to_document
 from linkevo.sim.physical import physical_checks
-from linkevo.workers.artifacts import write_json_atomic, write_parquet_atomic
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
+from linkevo.workers.store.tracking import ensure_experiment
 
 GRID = "0123456789ab"
 """A grid with two finished MAP-LIS/Fp trials, the second one better, and one EA/Fsl."""

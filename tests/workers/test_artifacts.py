@@ -14,7 +14,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from linkevo.workers.artifacts import (
+from linkevo.workers.store.artifacts import (
     TEMP_INFIX,
     atomic_path,
     read_npz,
@@ -26,7 +26,7 @@ from linkevo.workers.artifacts import (
 KILLED_WRITER = """
 import os, signal, sys
 from pathlib import Path
-from linkevo.workers.artifacts import atomic_path
+from linkevo.workers.store.artifacts import atomic_path
 with atomic_path(Path(sys.argv[1])) as tmp:
     tmp.write_bytes(b"half a checkpoint")
     os.kill(os.getpid(), signal.SIGKILL)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from mlflow.tracking import MlflowClient
 
-from linkevo.workers.mlflow_recorder import MAX_BATCH, MlflowRecorder
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.mlflow_recorder import MAX_BATCH, MlflowRecorder
+from linkevo.workers.store.tracking import ensure_experiment
 
 NAMES = [f"metric_{k}" for k in range(12)]
 

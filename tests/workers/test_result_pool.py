@@ -6,7 +6,7 @@ import numpy as np
 
 from linkevo.sim import evaluate, random_genomes
 from linkevo.workers.evaluators import LocalEvaluator
-from linkevo.workers.result_pool import KEEP, MemoryBuffer, ResultPool
+from linkevo.workers.result_pool import KEEP, ResultPool
 
 
 def test_local_evaluator_reuses_a_buffer_only_once_its_results_are_dropped():
@@ -31,16 +31,17 @@ def test_local_evaluator_reuses_a_buffer_only_once_its_results_are_dropped():
 
 
 def test_pool_keeps_a_bounded_number_of_buffers_and_grows_with_the_batch():
-    made: list[MemoryBuffer] = []
-
-    def make(n: int) -> MemoryBuffer:
-        made.append(MemoryBuffer(n, 40, 1))
-        return made[-1]
-
-    pool = ResultPool(make)
-    held = [pool.free(10).evaluation() for _ in range(KEEP + 2)]
-    assert len(made) == KEEP + 2 and all(buffer.busy for buffer in made)
+    pool = ResultPool(40, 1)
+    made = [pool.free(10) for _ in range(KEEP + 2)]
+    held = [buffer.evaluation() for buffer in made]
+    assert len({id(b) for b in made}) == 1  # nobody held the first: it was handed out again
+    made, held = [], []
+    for _ in range(KEEP + 2):
+        made.append(pool.free(10))
+        held.append(made[-1].evaluation())
+    assert len({id(b) for b in made}) == KEEP + 2 and all(buffer.busy for buffer in made)
     held.clear()
+    assert not any(buffer.busy for buffer in made)
     assert pool.free(10) is made[2]  # the two oldest were let go
-    assert pool.free(11).capacity == 11
-    assert len(made) == KEEP + 3
+    bigger = pool.free(11)
+    assert bigger.capacity == 11 and bigger not in made

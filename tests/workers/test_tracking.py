@@ -9,11 +9,11 @@ from pathlib import Path
 
 from mlflow.tracking import MlflowClient
 
-from linkevo.workers.tracking import EXPERIMENT_KIND, ensure_experiment
+from linkevo.workers.store.tracking import EXPERIMENT_KIND, ensure_experiment
 
 OPEN_STORE = """
 import sys, time
-from linkevo.workers.tracking import ensure_experiment
+from linkevo.workers.store.tracking import ensure_experiment
 start = float(sys.argv[2])
 while time.time() < start:
     pass

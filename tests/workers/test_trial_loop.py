@@ -14,9 +14,9 @@ import pyarrow.parquet as pq
 import pytest
 
 from linkevo.sim.linkage_doc import from_document
-from linkevo.workers.artifacts import read_npz
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
+from linkevo.workers.store.artifacts import read_npz
 from linkevo.workers.trial import TrialSpec, TrialSpecError, build_optimizer, run_trial
 
 BATCH = 100

@@ -15,7 +15,7 @@ from PIL import Image
 
 from linkevo.sim.robot import LEG_SLOTS
 from linkevo.sim.walk import Walk
-from linkevo.workers.artifacts import atomic_path
+from linkevo.workers.store.artifacts import atomic_path
 
 
 def render_frames(

@@ -17,7 +17,7 @@ from matplotlib.figure import Figure
 from linkevo.algorithms.pareto import non_dominated_ranks
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.study import is_map_elites, is_pareto
-from linkevo.workers.artifacts import atomic_path
+from linkevo.workers.store.artifacts import atomic_path
 
 DOWNSAMPLED = 5
 """Side of the downsampled path maps (5 × 5 cells, as in the study)."""

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from linkevo.workers.artifacts import atomic_path
-from linkevo.workers.drawing import LABEL_BOX
+from linkevo.workers.plots.linkage import LABEL_BOX
+from linkevo.workers.store.artifacts import atomic_path
 
 BEAM_HALF_WIDTH = 0.45
 """Half a Technic beam's width, modules (7.2 mm / 2 at 8 mm per module)."""

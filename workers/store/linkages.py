@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.linkage_doc import to_document
-from linkevo.workers import run_layout as layout
+from linkevo.workers.store import run_layout as layout
 
 if TYPE_CHECKING:
     from mlflow.tracking import MlflowClient

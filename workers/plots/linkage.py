@@ -1,6 +1,6 @@
 """Provides linkage drawings: a still like the paper's Fig. 1 (PNG) or one crank turn (GIF).
 
-The LEGO build's own drawings are in `workers.build_drawings`."""
+The LEGO build's own drawings are in `workers.plots.build`."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from linkevo.sim.decode import decode
 from linkevo.sim.genome import validate_genomes
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.study import DEFAULT_ANGLES
-from linkevo.workers.artifacts import atomic_path
+from linkevo.workers.store.artifacts import atomic_path
 
 SUFFIXES = (".png", ".gif")
 LABEL_BOX = {"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none"}
