@@ -70,8 +70,24 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def quiet_libraries() -> None:
+    """Keeps the libraries' routine messages off the terminal, so that what linkevo prints
+    is what the user must know: MLflow's INFO lines (creating a store's tables, say) and
+    download progress bars, and Ray's notice that token authentication is on (it is, and
+    the embedded instance needs nothing from the user). Set in the environment, so Ray
+    workers and MLflow subprocesses inherit it; a value the user set is kept."""
+    import logging
+    import os
+
+    os.environ.setdefault("MLFLOW_LOGGING_LEVEL", "WARNING")
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
+    notice = "ray._private.authentication.authentication_token_setup"
+    logging.getLogger(notice).setLevel(logging.ERROR)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Runs the CLI and returns the process exit code."""
+    quiet_libraries()
     parser = build_parser()
     args = parser.parse_args(argv)
     from linkevo.workers.store.tracking import TrackingUriError

@@ -85,7 +85,7 @@ def lost_trial(
         if run.info.status == "RUNNING":
             end_run(ctx.client, run.info.run_id, "FAILED", message)
     run_id = runs[0].info.run_id if runs else ""
-    return TrialOutcome(cell.key, "FAILED", run_id, None, None, 0.0, message[:500])
+    return TrialOutcome(cell.key, "FAILED", run_id, None, None, 0.0, message[: layout.ERROR_CHARS])
 
 
 @contextlib.contextmanager

@@ -53,7 +53,8 @@ def cell_summaries(config: GridConfig, outcomes: tuple[TrialOutcome, ...]) -> di
             cell = [
                 o
                 for o in outcomes
-                if o.trial_key.startswith(f"{approach}/{fitness}/") and o.status == "FINISHED"
+                if layout.parse_trial_key(o.trial_key)[:2] == (approach, fitness)
+                and o.status == "FINISHED"
             ]
             prefix = f"{approach}/{fitness}"
             metrics[f"{prefix}/finished"] = float(len(cell))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
 import threading
@@ -64,6 +65,7 @@ def connect_ray(address: str | None, cluster: Cluster) -> bool:
             num_cpus=int(cluster.total_cpus),
             include_dashboard=False,
             object_store_memory=LOCAL_OBJECT_STORE_BYTES,
+            logging_level=logging.WARNING,  # not "Started a local Ray instance."
         )
     if in_main:
         # ray.init installs SIGTERM handlers (a native one that dumps a stack, a Python

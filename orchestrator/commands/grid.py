@@ -124,20 +124,38 @@ def run_grid(args: argparse.Namespace) -> int:
     print(
         f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."
     )
-    print(f"Open the UI with:  linkevo ui{_ui_flag(result.tracking_uri)}")
+    print(f"Open the UI with:  {_linkevo()} ui{_ui_flag(result.tracking_uri)}")
     return 1 if result.failed else 0
 
 
 def _resume_command(args: argparse.Namespace) -> str:
     """Returns the command line that completes this grid: the same config and options,
     with --resume."""
-    words = ["linkevo", "grid", str(args.config)]
+    words = [*shlex.split(_linkevo()), "grid", str(args.config)]
     for override in args.overrides:
         words += ["--set", override]
     for flag, value in (("--tracking-uri", args.tracking_uri), ("--address", args.address)):
         if value is not None:
             words += [flag, value]
     return shlex.join([*words, "--resume"])
+
+
+def _linkevo() -> str:
+    """Returns how to run linkevo again as this process was run: `linkevo` when that name
+    finds this program, else its path (an environment that is not activated), else
+    `python -m linkevo.orchestrator`."""
+    import os
+    import shutil
+    from pathlib import Path
+
+    program = Path(sys.argv[0])
+    if program.name != "linkevo":
+        return shlex.join([sys.executable, "-m", "linkevo.orchestrator"])
+    found = shutil.which("linkevo")
+    if found and Path(found).resolve() == program.resolve():
+        return "linkevo"
+    shown = os.path.relpath(program) if program.resolve().is_relative_to(Path.cwd()) else program
+    return shlex.quote(str(shown))
 
 
 def _ui_flag(uri: str) -> str:
@@ -147,7 +165,9 @@ def _ui_flag(uri: str) -> str:
 
 
 def run_ui(args: argparse.Namespace) -> int:
-    """Runs `mlflow ui` on the store, bound to 127.0.0.1, until interrupted."""
+    """Runs `mlflow ui` on the store, bound to 127.0.0.1, until Ctrl-C or SIGTERM, which
+    stop the server with it."""
+    from linkevo.orchestrator.process_sessions import in_use, stop_session
     from linkevo.workers.store.tracking import (
         artifact_root_for,
         require_store,
@@ -161,13 +181,28 @@ def run_ui(args: argparse.Namespace) -> int:
             "allowed here: a sqlite:/// URI or a store folder"
         )
     require_store(uri)
+    if not 0 < args.port < 65536 or in_use(args.port):
+        raise CliError(
+            f"--port {args.port}: not a free loopback port (another program listens there, "
+            "or it is out of range); pass a free one, e.g. --port 5001"
+        )
     command = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri]
     artifacts = artifact_root_for(uri)
     if artifacts:
         command += ["--default-artifact-root", artifacts]
     command += ["--host", "127.0.0.1", "--port", str(args.port)]
     print(f"MLflow UI on http://127.0.0.1:{args.port}  (Ctrl-C stops it)", file=sys.stderr)
-    return subprocess.call(command)
+    server = subprocess.Popen(command, start_new_session=True)
+
+    def stop(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, stop)
+    try:
+        return server.wait()
+    except KeyboardInterrupt:
+        stop_session(server.pid)
+        return 0
 
 
 def describe(grid: Grid, cluster: Cluster) -> str:
@@ -197,6 +232,8 @@ def _fmt(value: float | None) -> str:
 def summary(result: GridResult, config: GridConfig) -> str:
     """Returns the end-of-grid table: per cell trials finished and best loss (min, median),
     then every failed trial with its error."""
+    from linkevo.workers.store import run_layout as layout
+
     lines = [
         f"grid {result.grid_id}: {len(result.outcomes) - len(result.failed)}/"
         f"{len(result.outcomes)} trials finished ({len(result.skipped)} already finished "
@@ -206,7 +243,11 @@ def summary(result: GridResult, config: GridConfig) -> str:
     ]
     for approach in config.approaches:
         for fitness in config.fitnesses:
-            cell = [o for o in result.outcomes if o.trial_key.startswith(f"{approach}/{fitness}/")]
+            cell = [
+                o
+                for o in result.outcomes
+                if layout.parse_trial_key(o.trial_key)[:2] == (approach, fitness)
+            ]
             losses = [
                 o.best_loss for o in cell if o.status == "FINISHED" and o.best_loss is not None
             ]

@@ -36,7 +36,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--buildable", action="store_true", help="with --list: only cells that pass the checks"
     )
-    parser.add_argument("--best", action="store_true", help="REF is a grid id: take its best trial")
+    parser.add_argument(
+        "--best",
+        action="store_true",
+        help="REF is a grid id: take its best buildable design (see --any)",
+    )
+    parser.add_argument(
+        "--any", action="store_true", help="with --best: the best design, buildable or not"
+    )
     parser.add_argument("--approach", help="with --best: only this approach")
     parser.add_argument("--fitness", help="with --best: only this fitness")
     parser.add_argument("--experiment", default="linkevo", help="MLflow experiment")
@@ -45,16 +52,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
     )
-    parser.add_argument("--out", type=Path, default=Path("pulled"), help="output folder")
+    parser.add_argument("--out", type=Path, default=None, help="output folder (default pulled)")
     parser.add_argument("--gif", action="store_true", help="also animate one crank turn")
     parser.set_defaults(func=handle)
 
 
-"""What a grid id looks like (the first 12 hex digits of a hash, `docs/grid.md`)."""
-
-
-def best_trial(client, experiment: str, grid_id: str, approach: str | None, fitness: str | None):
-    """Returns the run id of the grid's FINISHED trial with the lowest best_loss.
+def grid_trials(client, experiment: str, grid_id: str, approach: str | None, fitness: str | None):
+    """Returns the grid's FINISHED trials with a best loss, lowest first (of one approach
+    and fitness when given).
 
     Raises:
         CliError: naming an unknown experiment, grid, approach or fitness with the valid
@@ -95,8 +100,51 @@ def best_trial(client, experiment: str, grid_id: str, approach: str | None, fitn
     ]
     if not kept:
         raise CliError(f"grid {grid_id} has no finished trial with a best loss to pull")
-    best = min(kept, key=lambda r: r.data.metrics["best_loss"])
-    return best.info.run_id
+    return sorted(kept, key=lambda r: (r.data.metrics["best_loss"], r.info.run_id))
+
+
+def best_design(client, trials: list) -> tuple[str, str, list[str]]:
+    """Returns (linkage reference, what it is, what was passed over) for the lowest-loss
+    buildable design among `trials` (lowest best loss first).
+
+    A trial offers its best linkage and, when that is not buildable and the trial keeps a
+    repertoire, its lowest-loss buildable cell; trials are read until none left can beat
+    the design found. Buildable is `sim.physical`'s verdict (it turns fully, no toggle,
+    transmission angles above the limit).
+
+    Raises:
+        CliError: no trial offers a buildable design.
+    """
+    from linkevo.orchestrator.pull import checks_line
+    from linkevo.sim.linkage_doc import from_document, to_document
+    from linkevo.sim.study import REPERTOIRE_APPROACHES
+    from linkevo.workers.store.linkages import LinkageRef, list_cells, load_source
+
+    found: tuple[float, str, str] | None = None
+    passed_over = []
+    for run in trials:
+        loss, run_id = run.data.metrics["best_loss"], run.info.run_id
+        if found is not None and loss >= found[0]:
+            break
+        key = run.data.tags.get(layout.TRIAL_KEY, run_id)
+        genome, mode = from_document(load_source(client, LinkageRef(run_id)).document)
+        checks = to_document(genome, mode)["checks"]
+        if checks["buildable"]:
+            found = (loss, run_id, f"{key}'s best linkage (run {run_id}), loss {loss:.6g}")
+            break
+        passed_over.append(f"{key}'s best linkage, loss {loss:.6g}: {checks_line(checks)}")
+        if run.data.tags.get(layout.APPROACH) in REPERTOIRE_APPROACHES:
+            cells = list_cells(client, run_id, 1, mode, buildable=True)
+            if not cells.empty and (found is None or cells.loss[0] < found[0]):
+                cell = int(cells.cell[0])
+                what = f"{key}'s cell {cell} (run {run_id}), loss {cells.loss[0]:.6g}"
+                found = (float(cells.loss[0]), f"{run_id}:{cell}", what)
+    if found is None:
+        raise CliError(
+            f"no buildable design among the {len(trials)} trials' best linkages and "
+            "repertoires; pass --any for the best design regardless"
+        )
+    return found[1], found[2], passed_over
 
 
 def handle(args: argparse.Namespace) -> int:
@@ -107,17 +155,22 @@ def handle(args: argparse.Namespace) -> int:
     from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
+    _refuse_ignored(args)
     client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
     text = args.ref
     if args.best:
-        text = best_trial(client, args.experiment, args.ref, args.approach, args.fitness)
-        run = client.get_run(text)
-        tags = run.data.tags
-        print(
-            f"best trial of grid {args.ref}: {tags.get('trial_key')} (run {text}), best loss "
-            f"{run.data.metrics['best_loss']:.6g}",
-            file=sys.stderr,
-        )
+        trials = grid_trials(client, args.experiment, args.ref, args.approach, args.fitness)
+        if args.any:
+            text = trials[0].info.run_id
+            key = trials[0].data.tags.get(layout.TRIAL_KEY)
+            loss = trials[0].data.metrics["best_loss"]
+            print(f"best design of grid {args.ref}, buildable or not: {key}'s best linkage "
+                  f"(run {text}), loss {loss:.6g}", file=sys.stderr)  # fmt: skip
+        else:
+            text, what, passed_over = best_design(client, trials)
+            print(f"best buildable design of grid {args.ref}: {what}", file=sys.stderr)
+            for line in passed_over:
+                print(f"  passed over {line}", file=sys.stderr)
     try:
         ref = LinkageRef.parse(text)
         if args.list is not None:
@@ -128,9 +181,24 @@ def handle(args: argparse.Namespace) -> int:
     cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
     print(f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
           file=sys.stderr)  # fmt: skip
-    for path in pull(source, args.out, gif=args.gif):
+    for path in pull(source, args.out or Path("pulled"), gif=args.gif):
         print(path)
     return 0
+
+
+def _refuse_ignored(args: argparse.Namespace) -> None:
+    """Raises CliError for an option that the other options given would leave unused."""
+    needs = {
+        "--buildable": (args.buildable, args.list is not None, "--list"),
+        "--any": (args.any, args.best, "--best"),
+        "--approach": (args.approach is not None, args.best, "--best"),
+        "--fitness": (args.fitness is not None, args.best, "--best"),
+        "--out": (args.out is not None, args.list is None, "no --list (--list only prints)"),
+        "--gif": (args.gif, args.list is None, "no --list (--list only prints)"),
+    }
+    for option, (given, allowed, what) in needs.items():
+        if given and not allowed:
+            raise CliError(f"{option} works only with {what}")
 
 
 def _print_cells(client, ref, top: int, buildable: bool) -> int:

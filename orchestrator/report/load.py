@@ -115,7 +115,13 @@ def find_grid_run(client, grid_id: str | None, experiment: str) -> tuple[str, st
             f"no {wanted} in experiment {experiment!r}; known grids: {names or 'none'}"
         )
     run = runs[0]
-    return run.data.tags[layout.GRID_ID], run.info.run_id
+    try:
+        found = layout.checked_id(
+            run.data.tags[layout.GRID_ID], f"the grid_id tag of run {run.info.run_id}"
+        )
+    except ValueError as exc:
+        raise GridNotFoundError(f"{exc}; pass a grid id that is one") from exc
+    return found, run.info.run_id
 
 
 def load_grid(

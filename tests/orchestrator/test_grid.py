@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -17,6 +18,7 @@ import pytest
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.config import GridConfig
 from linkevo.orchestrator.grid import Grid, trial_seed
+from linkevo.orchestrator.process_sessions import processes_using
 from linkevo.workers.store.tracking import ensure_experiment
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -83,7 +85,7 @@ def test_ui_serves_the_store_on_loopback(tmp_path):
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]
-    code = "import sys; from orchestrator.cli import main; sys.exit(main())"
+    code = "import sys; from linkevo.orchestrator.cli import main; sys.exit(main())"
     ui = subprocess.Popen(
         [sys.executable, "-c", code, "ui", "--tracking-uri", uri, "--port", str(port)],
         stdout=subprocess.DEVNULL,
@@ -105,6 +107,36 @@ def test_ui_serves_the_store_on_loopback(tmp_path):
         with urllib.request.urlopen(request, timeout=10) as r:
             names = [e["name"] for e in json.loads(r.read())["experiments"]]
         assert "linkevo" in names
+        busy = subprocess.run(
+            [sys.executable, "-c", code, "ui", "--tracking-uri", uri, "--port", str(port)],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert busy.returncode == 2 and f"--port {port}: not a free loopback port" in busy.stderr
+        ui.send_signal(signal.SIGTERM)  # to linkevo ui alone: it stops its server
+        assert ui.wait(timeout=60) == 0
+        with pytest.raises(OSError):
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2)
+        deadline = time.monotonic() + 30
+        while processes_using(uri) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not processes_using(uri)  # no server process on the store is left
     finally:
-        os.killpg(ui.pid, signal.SIGTERM)
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(ui.pid, signal.SIGKILL)
         ui.wait(timeout=30)
+
+
+def test_the_commands_it_prints_run_as_this_one_was_run(monkeypatch, tmp_path):
+    from linkevo.orchestrator.commands.grid import _linkevo
+
+    venv_linkevo = Path(sys.executable).parent / "linkevo"
+    monkeypatch.setattr(sys, "argv", [str(venv_linkevo), "grid"])
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")  # an environment that is not activated
+    monkeypatch.chdir(tmp_path)
+    assert _linkevo() == str(venv_linkevo)
+    monkeypatch.setenv("PATH", f"{venv_linkevo.parent}:/usr/bin:/bin")
+    assert _linkevo() == "linkevo"
+    monkeypatch.setattr(sys, "argv", ["-c", "grid"])
+    assert _linkevo().endswith("-m linkevo.orchestrator")

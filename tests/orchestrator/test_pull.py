@@ -126,9 +126,76 @@ def test_pull_a_cell_and_the_best_trial_of_a_grid(store, tmp_path):
     assert [int(r["holes"]) for r in rows] == [r["holes"] for r in sheet]
     assert "LEGO build: " in (cell / "build_sheet.md").read_text()
     best = tmp_path / "grid-best"
-    argv = ["pull", GRID, "--best", "--fitness", "Fp", "--tracking-uri", uri, "--out", str(best)]
-    assert main(argv) == 0
+    argv = ["pull", GRID, "--best", "--any", "--fitness", "Fp", "--tracking-uri", uri]
+    assert main([*argv, "--out", str(best)]) == 0
     assert runs[1] in (best / "build_sheet.md").read_text()
+
+
+def test_pull_best_passes_over_an_unbuildable_best_design(tmp_path, capsys):
+    genomes = sim.random_genomes(np.random.default_rng(3), 2000)
+    batch = sim.decode(genomes)
+    checks = physical_checks(batch, sim.simulate(batch))
+    valid = sim.evaluate(genomes).error == 0
+    good = genomes[np.flatnonzero(checks.buildable & valid)[:2]]
+    bad = genomes[np.flatnonzero(~checks.buildable & checks.turns_fully & valid)[:2]]
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    experiment = ensure_experiment(uri)
+    client = MlflowClient(uri)
+    client.create_run(experiment, tags={"grid_id": GRID, "linkevo.kind": "grid"})
+    runs = []
+    for index, (best, loss, cells) in enumerate(
+        ((bad[0], 10.0, [(bad[1], 11.0), (good[0], 12.0)]), (good[1], 15.0, []))
+    ):
+        tags = {"grid_id": GRID, "linkevo.kind": "trial", "approach": "MAP-LIS", "fitness": "Fp"}
+        run = client.create_run(experiment, tags={**tags, "trial_key": f"MAP-LIS/Fp/0{index}"})
+        client.log_param(run.info.run_id, "mode", "paper")
+        client.log_metric(run.info.run_id, "best_loss", loss)
+        folder = tmp_path / f"art{index}"
+        folder.mkdir()
+        write_json_atomic(folder / "best_linkage.json", to_document(best))
+        write_parquet_atomic(
+            folder / "repertoire.parquet",
+            {
+                "cell": np.array([11 + c for c in range(len(cells))], dtype=np.int64),
+                "bin_0": np.zeros(len(cells), dtype=np.int64),
+                "bin_1": np.arange(len(cells), dtype=np.int64),
+                "loss": np.array([c[1] for c in cells]),
+                "genome": np.array([c[0] for c in cells]).reshape(len(cells), genomes.shape[1]),
+            },
+        )
+        client.log_artifacts(run.info.run_id, str(folder))
+        client.set_terminated(run.info.run_id)
+        runs.append(run.info.run_id)
+    out = tmp_path / "built"
+    assert main(["pull", GRID, "--best", "--tracking-uri", uri, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert f"best buildable design of grid {GRID}: MAP-LIS/Fp/00's cell 12" in err
+    assert "passed over MAP-LIS/Fp/00's best linkage, loss 10: Checks: NOT buildable" in err
+    pulled = json.loads((out / "linkage.json").read_text())
+    assert pulled["checks"]["buildable"] and pulled["checks"] == to_document(good[0])["checks"]
+    anyway = tmp_path / "any"
+    assert main(["pull", GRID, "--best", "--any", "--tracking-uri", uri, "--out", str(anyway)]) == 0
+    assert f"buildable or not: MAP-LIS/Fp/00's best linkage (run {runs[0]})" in (
+        capsys.readouterr().err
+    )
+    assert not json.loads((anyway / "linkage.json").read_text())["checks"]["buildable"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--buildable"], "--buildable works only with --list"),
+        (["--any"], "--any works only with --best"),
+        (["--approach", "EA"], "--approach works only with --best"),
+        (["--list", "--gif"], "--gif works only with no --list"),
+        (["--list", "--out", "x"], "--out works only with no --list"),
+    ],
+)
+def test_pull_refuses_options_it_would_ignore(store, tmp_path, capsys, extra, message):
+    uri, runs, _, _ = store
+    assert main(["pull", runs[0], *extra, "--tracking-uri", uri]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
 
 
 def test_pull_best_asks_for_the_fitness_when_the_grid_has_two(store, tmp_path, capsys):

@@ -299,6 +299,19 @@ def test_cli_reports_latest_grid_and_names_unknown_grids(grid, tmp_path, capsys)
     assert "no MLflow store at" in capsys.readouterr().err
 
 
+def test_a_hostile_grid_id_tag_never_names_a_folder(tmp_path, capsys, monkeypatch):
+    hostile = "../../../EVIL_OUT"
+    spec = GridSpec(grid_id=hostile, approaches=("EA",), fitnesses=("Fp",), trials=1)
+    written = write_grid(tmp_path / "store", spec)
+    work = tmp_path / "a" / "b" / "c"
+    work.mkdir(parents=True)
+    monkeypatch.chdir(work)
+    assert main(["report", "--latest", "--tracking-uri", written.uri, "--no-log"]) == 2
+    err = capsys.readouterr().err
+    assert "the grid_id tag of run" in err and repr(hostile) in err and "Traceback" not in err
+    assert not (tmp_path / "EVIL_OUT").exists() and not list(work.iterdir())
+
+
 def test_a_grid_without_trials_is_a_clear_error(tmp_path, capsys):
     written = write_grid(tmp_path / "store", GridSpec(grid_id="g0empty", approaches=()))
     assert main(["report", "g0empty", "--tracking-uri", written.uri, "--no-log"]) == 2

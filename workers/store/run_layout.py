@@ -45,8 +45,9 @@ BEST_JSON = "best_linkage.json"
 REPERTOIRE = "repertoire.parquet"
 POPULATION = "population.parquet"
 
-ID_PATTERN = re.compile(r"[A-Za-z0-9_.-]+")
-"""What a run id or grid id a user types may hold (a grid id is 12 hex digits)."""
+ID_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,63}")
+"""What a run id or grid id may hold, typed or read back from a store (a grid id is 12 hex
+digits): no path separator, no leading dot, so an id can name a folder."""
 _KEY = re.compile(r"(?P<approach>[A-Za-z0-9_-]+)/(?P<fitness>[A-Za-z0-9_]+)/(?P<index>\d{2,})")
 _SAFE = re.compile(r"[A-Za-z0-9_./:+-]*")
 PAGE = 1000
@@ -68,6 +69,23 @@ def parse_trial_key(key: str) -> tuple[str, str, int]:
     if found is None:
         raise ValueError(f"trial key {key!r}: allowed APPROACH/FITNESS/NN, e.g. MAP-LIS/Fp/03")
     return found["approach"], found["fitness"], int(found["index"])
+
+
+def checked_id(value: str, what: str) -> str:
+    """Returns `value` if it is a well-formed id (`ID_PATTERN`).
+
+    Ids read back from a store (a shared one, say) are checked before they name a folder
+    or go into a search.
+
+    Raises:
+        ValueError: naming `what` (where the value came from), the value and what is allowed.
+    """
+    if not ID_PATTERN.fullmatch(value):
+        raise ValueError(
+            f"{what} {value!r} is not an id; allowed: up to 64 letters, digits, '_', '-' "
+            "and '.', not starting with '.'"
+        )
+    return value
 
 
 def quote(value: str) -> str:
