@@ -262,11 +262,11 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
         title=f"Example paths, {label(fitness)}",
         caption=(
             "Foot paths from each approach's best trial. MAP-Elites: the repertoire "
-            "downsampled to 5 × 5 with the best path of each region; NSGA-II: 5 paths "
-            "evenly spaced along the final Pareto front; EA: the 5 best paths of the final "
-            "population. Each path is scaled to fit its cell; the corner number is its "
-            "size (the larger of width and height, in LEGO units); colour is the "
-            "single-objective loss."
+            "downsampled to 5 × 5 with the best path of each region; NSGA-II: up to 5 "
+            "paths evenly spaced along the final Pareto front (fewer when the front holds "
+            "fewer linkages); EA: the 5 best paths of the final population. Each path is "
+            "scaled to fit its cell; the corner number is its size (the larger of width "
+            "and height, in LEGO units); colour is the single-objective loss."
         ),
         figure=fig,
     )
@@ -307,9 +307,12 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
         name="convergence",
         title="Convergence",
         caption=(
-            "Median (line) and inter-quartile band over finished trials of the best loss, "
-            "the repertoire coverage and the QD-score against evaluations, per approach "
-            "(approaches without a repertoire have no coverage or QD-score)."
+            "Median (line) and inter-quartile range (shaded band) over finished trials of "
+            "the best loss, the coverage and the QD-score against evaluations, per "
+            "approach. Coverage and QD-score are those of the repertoire for MAP-Elites and "
+            "RANDOM (it only grows), and of the current population on a published grid "
+            "(MAP-LIS's unless configured) for "
+            "the EA and NSGA-II (it can fall), so the two kinds do not compare directly."
         ),
         figure=fig,
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -11,11 +12,21 @@ import pandas as pd
 
 from linkevo.orchestrator.report.load import GridData
 from linkevo.orchestrator.report.stats import ALPHA
-from linkevo.sim.study import BASELINE, MULTI_OBJECTIVE, is_map_elites, is_pareto, label
+from linkevo.sim.study import (
+    BASELINE,
+    MULTI_OBJECTIVE,
+    STUDY_EVALUATIONS,
+    is_map_elites,
+    is_pareto,
+    label,
+)
 
 REPRODUCED = "reproduced"
 NOT_REPRODUCED = "not reproduced"
 NOT_TESTABLE = "not testable"
+NO_DIFFERENCE = "no difference found"
+"""The verdict on a claim of similarity when no pair differs: absence of evidence of a
+difference at this grid's number of trials, not evidence of similarity."""
 HOLDS = "holds"
 DOES_NOT_HOLD = "does not hold"
 """Verdicts of the checks that are linkevo's own, not the study's claims."""
@@ -28,7 +39,9 @@ class Finding:
     Attributes:
         claim: the study's claim, in words.
         rule: the test applied to this grid.
-        verdict: REPRODUCED, NOT_REPRODUCED or NOT_TESTABLE.
+        verdict: REPRODUCED, NOT_REPRODUCED, NO_DIFFERENCE or NOT_TESTABLE (HOLDS or
+            DOES_NOT_HOLD for linkevo's own checks); "not judged: a pipeline check ..." for
+            a grid below the study's budget.
         evidence: the numbers behind the verdict.
     """
 
@@ -135,10 +148,13 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         verdict, evidence = NOT_TESTABLE, "fewer than two approaches finished with Fsl"
     else:
         differing = fsl[fsl.significant]
-        verdict = REPRODUCED if differing.empty else NOT_REPRODUCED
+        verdict = NO_DIFFERENCE if differing.empty else NOT_REPRODUCED
         shown = differing if len(differing) else fsl.loc[[fsl.p_holm.idxmin()]]
-        evidence = f"{len(differing)} of {len(fsl)} pairs differ; " + "; ".join(
-            _describe(r) for r in shown.itertuples(index=False)
+        n = int(min(fsl.n_a.min(), fsl.n_b.min()))
+        evidence = (
+            f"{len(differing)} of {len(fsl)} pairs differ at n = {n} or more trials per "
+            "approach (no equivalence margin is tested, so this is no evidence of "
+            "similarity); " + "; ".join(_describe(r) for r in shown.itertuples(index=False))
         )
     findings.append(
         Finding(
@@ -151,6 +167,11 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
     findings.append(_oversized(grid))
     if BASELINE in approaches:
         findings += _against_random(grid, tests, [a for a in approaches if a != BASELINE])
+    budget = grid.config.get("evaluations")
+    if isinstance(budget, int) and budget < STUDY_EVALUATIONS:
+        judged = f"not judged: a pipeline check ({budget:,} of the study's {STUDY_EVALUATIONS:,} "
+        judged += "evaluations per trial)"
+        findings = [dataclasses.replace(f, verdict=judged) for f in findings]
     return findings
 
 

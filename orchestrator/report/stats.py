@@ -119,7 +119,7 @@ def pairwise_tests(trials: pd.DataFrame) -> pd.DataFrame:
         `TEST_COLUMNS`: fitness, family, approach_a, approach_b, n_a, n_b, median_a,
         median_b, u (U of a), method ("exact" or "asymptotic", see `mann_whitney`), p,
         p_holm, significant (p_holm < ALPHA), a12 (A12 of a over b), magnitude, better
-        (the approach with the lower median, or "" when equal).
+        (the approach with the lower median where the difference is significant, else "").
     """
     done = trials[(trials.status == "FINISHED") & trials.best_loss.notna()]
     frames = []
@@ -158,6 +158,7 @@ def pairwise_tests(trials: pd.DataFrame) -> pd.DataFrame:
                 continue
             frame["p_holm"] = holm(frame.p.to_numpy())
             frame["significant"] = frame.p_holm < ALPHA
+            frame["better"] = frame.better.where(frame.significant, "")
             frames.append(frame[list(TEST_COLUMNS)])
     if not frames:
         return pd.DataFrame(columns=list(TEST_COLUMNS))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import base64
+import html
 import io
 import json
 from pathlib import Path
@@ -18,7 +19,12 @@ from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.report import build_report, load_grid
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import checks_summary
-from linkevo.orchestrator.report.findings import NOT_TESTABLE, REPRODUCED, check_findings
+from linkevo.orchestrator.report.findings import (
+    NO_DIFFERENCE,
+    NOT_TESTABLE,
+    REPRODUCED,
+    check_findings,
+)
 from linkevo.orchestrator.report.html import table_html
 from linkevo.orchestrator.report.stats import holm, pairwise_tests
 from linkevo.sim import decode, simulate
@@ -158,7 +164,11 @@ def test_a12_and_u_agree_with_scipy_on_known_data():
     # pairs x > y: 3>2, 3>2, 7>all four = 6; ties x == y: 2=2, 3=3 twice = 3 -> (6 + 1.5) / 20
     assert row.a12 == pytest.approx(7.5 / 20)
     assert row.p_holm == pytest.approx(row.p)
-    assert row.better == "EA"
+    assert not row.significant and row.better == ""  # no winner named without significance
+    apart = trials.assign(best_loss=np.concatenate([x, y]) + np.repeat([0.0, 10.0], [5, 4]))
+    wide = pd.concat([apart, apart.assign(best_loss=apart.best_loss + 0.5)], ignore_index=True)
+    row = pairwise_tests(wide).iloc[0]
+    assert row.significant and row.better == "EA"
 
 
 def test_each_figure_has_its_panels_and_labels(loaded):
@@ -240,7 +250,8 @@ def test_findings_are_checked_with_their_numbers(grid, loaded):
     )
     fsl = result.tests[result.tests.fitness == "Fsl"]
     similar = verdicts["With F_sl, all approaches perform similarly."]
-    assert (similar.verdict == REPRODUCED) == (not fsl.significant.any())
+    assert (similar.verdict == NO_DIFFERENCE) == (not fsl.significant.any())
+    assert "no evidence of similarity" in similar.evidence
     findings_csv = pd.read_csv(result.out_dir / "findings.csv")
     assert findings_csv.verdict.tolist() == [f.verdict for f in result.findings]
     assert verdicts["F_sl tends to evolve oversized linkages."].verdict == REPRODUCED
@@ -297,6 +308,18 @@ def test_cli_reports_latest_grid_and_names_unknown_grids(grid, tmp_path, capsys)
     assert 'grid id "a\'b" is invalid' in capsys.readouterr().err
     assert main(["report", "--latest", "--tracking-uri", f"sqlite:///{tmp_path}/x.db"]) == 2
     assert "no MLflow store at" in capsys.readouterr().err
+
+
+def test_a_grid_below_the_study_budget_is_a_pipeline_check_without_verdicts(tmp_path):
+    spec = GridSpec(grid_id="g0small", approaches=("EA", "MAP-LIS"), trials=3, budget=1500)
+    written = write_grid(tmp_path / "store", spec)
+    result = build_report(written.uri, spec.grid_id, tmp_path / "out", log_to_mlflow=False)
+    judged = "not judged: a pipeline check (1,500 of the study's 726,750 evaluations per trial)"
+    assert result.findings and all(f.verdict == judged for f in result.findings)
+    page = result.html.read_text()
+    assert "class='text reproduced'" not in page and page.count(html.escape(judged)) == len(
+        result.findings
+    )
 
 
 def test_a_hostile_grid_id_tag_never_names_a_folder(tmp_path, capsys, monkeypatch):

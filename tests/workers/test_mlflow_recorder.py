@@ -56,6 +56,15 @@ def test_every_iteration_is_sent_when_the_interval_is_zero(tmp_path):
         assert steps(client, run_id, "loss") == list(range(1, iteration + 1))
 
 
+def test_a_metric_that_does_not_apply_in_an_iteration_is_not_logged(tmp_path):
+    client, run_id = new_run(tmp_path)
+    recorder = MlflowRecorder(client, run_id, send_every_s=0)
+    recorder.log_iteration(1, {"best_loss": 3.0, "recon_loss": float("nan")})
+    recorder.log_iteration(2, {"best_loss": 2.0, "recon_loss": 0.25})
+    assert steps(client, run_id, "recon_loss") == [2]
+    assert steps(client, run_id, "best_loss") == [1, 2]
+
+
 def test_result_files_are_logged_and_hidden_temporary_files_are_not(tmp_path):
     client, run_id = new_run(tmp_path)
     out = tmp_path / "trial"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -44,11 +45,17 @@ class MlflowRecorder:
         self._sent_at = -float("inf")  # the first iteration goes out at once
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
-        """Gathers one iteration's metrics with `step = iteration`; sends when it is time."""
+        """Gathers one iteration's metrics with `step = iteration`; sends when it is time.
+
+        A metric that does not apply in this iteration (NaN: MAP-AU's `recon_loss` between
+        trainings, say) is not logged, so the MLflow UI never shows it as NaN; `metrics.csv`
+        keeps every column.
+        """
         timestamp = int(time.time() * 1000)
         self._gathered += [
             Metric(key=name, value=float(value), timestamp=timestamp, step=int(iteration))
             for name, value in metrics.items()
+            if math.isfinite(value)
         ]
         if time.monotonic() - self._sent_at >= self._send_every_s:
             self._send()
