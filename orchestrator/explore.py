@@ -36,7 +36,7 @@ from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
-from linkevo.sim.study import DEFAULT_ANGLES, REPERTOIRE_APPROACHES
+from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, REPERTOIRE_APPROACHES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
 
@@ -157,6 +157,19 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
     }
 
 
+def best_view(views: list[dict]) -> int:
+    """Returns the index of the view the page opens on: the one holding the lowest loss
+    among the views of the first fitness in the study's order (losses of different
+    fitnesses do not compare); 0 when no view has a loss."""
+    first = ordered({v["fitness"] for v in views}, FITNESSES)[:1]
+    best = [
+        (min(c["l"] for c in v["cells"] if c["l"] is not None), i)
+        for i, v in enumerate(views)
+        if v["fitness"] in first and any(c["l"] is not None for c in v["cells"])
+    ]
+    return min(best)[1] if best else 0
+
+
 def render_page(title: str, views: list[dict]) -> str:
     """Returns the explorer page over one or more repertoire views (`repertoire_view`)."""
     template = (
@@ -183,6 +196,7 @@ def render_page(title: str, views: list[dict]) -> str:
         "buildable_stretch": BUILDABLE_STRETCH,
         "unit_mm": DEFAULT_UNIT_MM,
         "trials": index,
+        "first": best_view(views),
     }
     return (
         template.replace("{{TITLE}}", html.escape(title))

@@ -48,6 +48,9 @@ class GridInterrupted(Exception):
 
 @dataclass(frozen=True)
 class TrialContext:
+    """What every trial task of one launch shares: the store, the parent run, the trial
+    folders' root, each trial's spec and the reservation."""
+
     uri: str
     experiment_id: str
     parent_run_id: str

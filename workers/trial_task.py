@@ -37,11 +37,11 @@ SPEC_PARAMS: tuple[str, ...] = (
     "mode",
     "evaluations",
     "batch_size",
-    "seed",
     "n_angles",
     "target",
 )
-"""The TrialSpec fields logged as params of every trial run."""
+"""The TrialSpec fields logged as params of every trial run. The seed is a tag only: as a
+param, the MLflow UI's charts would plot it as a number (`3900000000.00000`)."""
 
 
 @dataclass(frozen=True)

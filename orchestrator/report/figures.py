@@ -14,6 +14,7 @@ from linkevo.sim.study import is_map_elites, label
 from linkevo.workers.plots.repertoire import (
     DOWNSAMPLED,
     LOSS_CMAP,
+    LOSS_LABEL,
     STRIP_PATHS,
     bin_columns,
     draw_paths,
@@ -192,7 +193,9 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
                 ax.set_ylabel(f"{space.names[0]} (bin)", fontsize=7)
                 ax.set_xlabel(f"{space.names[1]} (bin)", fontsize=7)
                 ax.tick_params(labelsize=6)
-        fig.colorbar(shown, ax=axes[row, :].tolist(), shrink=0.8, label="best loss", extend="max")
+        fig.colorbar(
+            shown, ax=axes[row, :].tolist(), shrink=0.8, label=f"best {LOSS_LABEL}", extend="max"
+        )
     return ReportFigure(
         name="repertoire_maps",
         title="Repertoire maps",
@@ -256,7 +259,7 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
             shape = (1, STRIP_PATHS) if strip else (DOWNSAMPLED, DOWNSAMPLED)
             lines = draw_paths(ax, chosen, shape, norm)
             ax.set_title(f"{label(approach)}, {label(fitness)}: {trial.trial_key}", fontsize=8)
-    fig.colorbar(lines, ax=axes.ravel().tolist(), shrink=0.6, label="loss", extend="max")
+    fig.colorbar(lines, ax=axes.ravel().tolist(), shrink=0.6, label=LOSS_LABEL, extend="max")
     return ReportFigure(
         name=f"paths_{fitness}",
         title=f"Example paths, {label(fitness)}",

@@ -242,14 +242,16 @@ def test_page_in_chromium_hover_click_pin_filter_and_fold(store, tmp_path, brows
     where = "return window.explorer.cellCenter(arguments[0])"
     before = browser.execute_script(where, moved["c"])
     folds = browser.find_elements(By.CSS_SELECTOR, "select.fold")
-    assert len(folds) == 4
-    Select(folds[0]).select_by_visible_text("moving_share")  # swaps with the tiles' y
+    shown = [Select(f).first_selected_option.text for f in folds]
+    # As the report folds a 4-D map: d3 and d1 along x (inner, outer), d2 and d0 up y.
+    assert shown == ["moving_share", "drive_size", "depth", "mean_beam_length"]
+    Select(folds[0]).select_by_visible_text("mean_beam_length")  # swaps with the tiles' y
     folds = browser.find_elements(By.CSS_SELECTOR, "select.fold")
     assert [Select(f).first_selected_option.text for f in folds] == [
-        "moving_share",
-        "depth",
-        "drive_size",
         "mean_beam_length",
+        "drive_size",
+        "depth",
+        "moving_share",
     ]
     assert browser.execute_script(where, moved["c"]) != before
     _point_at(browser, moved["c"])  # the folded map still finds each cell
@@ -267,15 +269,26 @@ def test_grid_page_in_chromium_picks_a_trial(store, tmp_path, browser):
     _open(browser, out)
     picker = Select(browser.find_element(By.ID, "trial"))
     assert [o.text.split(" ")[0] for o in picker.options] == ["MAP-LIS/Fp/00", "MAP-ST/Fp/00"]
-    picker.select_by_index(1)
-    deadline = time.monotonic() + 10
-    while runs["MAP-ST"] not in _text(browser, "summary"):
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
-    cell = views[1]["cells"][0]
+    lowest = [min(c["l"] for c in v["cells"] if c["l"] is not None) for v in views]
+    best = int(np.argmin(lowest))  # the page opens on the trial holding the lowest loss
+    assert picker.first_selected_option.text.startswith(views[best]["trial_key"])
+    _wait_for(browser, "summary", runs[views[best]["approach"]])
+    legend = _text(browser, "legend")
+    assert "2nd to 98th percentile" in legend and f"all: {lowest[best]:.4f} to" in legend
+    other = 1 - best
+    picker.select_by_index(other)
+    _wait_for(browser, "summary", runs[views[other]["approach"]])
+    cell = views[other]["cells"][0]
     _point_at(browser, cell["c"], click=True)
     said = _text(browser, "selected-info")
-    assert f"MAP-ST/Fp/00, cell {cell['c']}: loss {cell['l']:.4f}" in said
+    assert f"{views[other]['trial_key']}, cell {cell['c']}: loss {cell['l']:.4f}" in said
+
+
+def _wait_for(browser, element: str, text: str) -> None:
+    deadline = time.monotonic() + 10
+    while text not in _text(browser, element):
+        assert time.monotonic() < deadline, f"{text!r} never showed in #{element}"
+        time.sleep(0.05)
 
 
 def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, mlflow_server):

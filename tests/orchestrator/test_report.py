@@ -193,7 +193,7 @@ def test_each_figure_has_its_panels_and_labels(loaded):
     paths = fig.path_maps_figure(loaded, "Fp").figure
     titled = [ax.get_title().split(":")[0] for ax in paths.axes if ax.get_title()]
     assert titled == ["MAP-WH, F_p", "MAP-ST, F_p", "EA, F_p", "NSGA-II, F_p"]
-    assert paths.axes[-1].get_ylabel() == "loss"  # the one shared colour bar
+    assert paths.axes[-1].get_ylabel() == fig.LOSS_LABEL  # the one shared colour bar
     ea = next(ax for ax in paths.axes if ax.get_title().startswith("EA"))
     assert len(ea.collections[0].get_segments()) == fig.STRIP_PATHS
     assert len(ea.texts) == fig.STRIP_PATHS

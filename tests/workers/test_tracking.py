@@ -9,7 +9,11 @@ from pathlib import Path
 
 from mlflow.tracking import MlflowClient
 
-from linkevo.workers.store.tracking import EXPERIMENT_KIND, ensure_experiment
+from linkevo.workers.store.tracking import (
+    EXPERIMENT_DESCRIPTION,
+    EXPERIMENT_KIND,
+    ensure_experiment,
+)
 
 OPEN_STORE = """
 import sys, time
@@ -55,8 +59,13 @@ def test_processes_opening_a_fresh_store_together_all_get_one_experiment(tmp_pat
         assert ensure_experiment(uri, "linkevo") == ids.pop()
 
 
-def test_experiment_opens_as_model_development(tmp_path: Path):
+def test_experiment_opens_as_model_development_with_a_description(tmp_path: Path):
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     experiment_id = ensure_experiment(uri, "linkevo")
-    tags = MlflowClient(uri).get_experiment(experiment_id).tags
+    client = MlflowClient(uri)
+    tags = client.get_experiment(experiment_id).tags
     assert tags.items() >= EXPERIMENT_KIND.items()
+    assert tags["mlflow.note.content"] == EXPERIMENT_DESCRIPTION
+    older = client.create_experiment("older")  # made without a description
+    assert ensure_experiment(uri, "older") == older
+    assert client.get_experiment(older).tags["mlflow.note.content"] == EXPERIMENT_DESCRIPTION

@@ -23,7 +23,9 @@ DOWNSAMPLED = 5
 """Side of the downsampled path maps (5 × 5 cells, as in the study)."""
 STRIP_PATHS = 5
 """Paths shown for EA (best of the final population) and NSGA-II (along the front)."""
-LOSS_CMAP = "viridis"
+LOSS_CMAP = "viridis_r"
+"""Low (good) losses bright yellow, high ones dark purple: the explorer's colours too."""
+LOSS_LABEL = "loss (brighter is lower, better)"
 CLIP_QUANTILE = 0.95
 """Loss colour scales end at this quantile of the losses shown."""
 
@@ -43,9 +45,11 @@ def loss_norm(losses: np.ndarray) -> Normalize:
 def fold_bins(bins: np.ndarray, resolution: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Returns (rows (N,), cols (N,), side) placing D-dimensional bins on a 2-D image.
 
-    2-D bins (b0, b1) map to row b0, column b1. 4-D bins (b0, b1, b2, b3) fold to
-    row = b0 * R + b2, column = b1 * R + b3: b0 and b1 choose an R × R block (outer axes),
-    b2 and b3 the cell inside it (inner axes), so R = 10 gives a 100 × 100 image.
+    The second descriptor runs along x (columns), the first up y (rows), as in the
+    explorer's default arrangement: 2-D bins (b0, b1) map to row b0, column b1. 4-D bins
+    (b0, b1, b2, b3) fold to row = b0 * R + b2, column = b1 * R + b3: b0 and b1 choose an
+    R × R block (outer axes), b2 and b3 the cell inside it (inner axes), so R = 10 gives a
+    100 × 100 image.
 
     Args:
         bins: (N, D) int bins, D in {2, 4}.
@@ -171,7 +175,9 @@ def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> N
         shown = heat.imshow(image, origin="lower", cmap=LOSS_CMAP, norm=norm)
         heat.set_title(f"{approach}: best loss per cell ({len(archive)} filled)", fontsize=8)
         heat.tick_params(labelsize=6)
-        fig.colorbar(shown, cax=bar, extend="max").ax.tick_params(labelsize=6)
+        colour_bar = fig.colorbar(shown, cax=bar, extend="max")
+        colour_bar.set_label(LOSS_LABEL, fontsize=6)
+        colour_bar.ax.tick_params(labelsize=6)
         paths.set_title(f"best path per region ({DOWNSAMPLED} x {DOWNSAMPLED})", fontsize=8)
         shape = (DOWNSAMPLED, DOWNSAMPLED)
     else:

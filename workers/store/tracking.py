@@ -14,6 +14,16 @@ DEFAULT_EXPERIMENT = "linkevo"
 EXPERIMENT_KIND = {"mlflow.experimentKind": "custom_model_development"}
 """Opens the experiment in the MLflow UI's runs table (model development), not its GenAI
 view: a grid's runs are trials with metrics, not traces."""
+EXPERIMENT_DESCRIPTION = (
+    "linkevo: evolved leg linkages for a hexapod (Evolution of linkages for prototyping of "
+    "linkage based robots). Each grid is a parent run `grid-<grid_id>` whose description "
+    "says what it ran; its nested runs are the trials (tags approach, fitness, trial_key; "
+    "metrics best_loss, coverage, qd_score per iteration; the repertoire or population and "
+    "the best linkage as artefacts). Field trials, real and simulated, are runs tagged "
+    "`linkevo.kind = field_trial`. Compare trials by best_loss within one fitness; "
+    "`linkevo report GRID_ID` gives the study's figures and statistics."
+)
+"""The experiment's description in the MLflow UI (`mlflow.note.content`)."""
 
 
 def default_tracking_uri(store_dir: Path | None = None) -> str:
@@ -104,7 +114,8 @@ def store_lock(uri: str) -> Iterator[None]:
 
 def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
     """Creates the store and experiment if needed (driver side, before any fan-out), as a
-    model-development experiment (`EXPERIMENT_KIND`); returns the experiment id.
+    model-development experiment (`EXPERIMENT_KIND`) with a description
+    (`EXPERIMENT_DESCRIPTION`, added to an experiment without one); returns its id.
 
     The store's schema and the experiment are created under `store_lock`, so launches
     started together on a fresh store queue up instead of racing.
@@ -115,7 +126,10 @@ def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
         client = MlflowClient(tracking_uri=uri)
         experiment = client.get_experiment_by_name(name)
         if experiment is not None:
+            if "mlflow.note.content" not in experiment.tags:  # a store made before it had one
+                client.set_experiment_tag(
+                    experiment.experiment_id, "mlflow.note.content", EXPERIMENT_DESCRIPTION
+                )
             return experiment.experiment_id
-        return client.create_experiment(
-            name, artifact_location=artifact_root_for(uri), tags=EXPERIMENT_KIND
-        )
+        tags = EXPERIMENT_KIND | {"mlflow.note.content": EXPERIMENT_DESCRIPTION}
+        return client.create_experiment(name, artifact_location=artifact_root_for(uri), tags=tags)
