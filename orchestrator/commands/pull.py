@@ -167,7 +167,10 @@ def handle(args: argparse.Namespace) -> int:
             print(f"best design of grid {args.ref}, buildable or not: {key}'s best linkage "
                   f"(run {text}), loss {loss:.6g}", file=sys.stderr)  # fmt: skip
         else:
-            text, what, passed_over = best_design(client, trials)
+            try:
+                text, what, passed_over = best_design(client, trials)
+            except LinkageError as exc:
+                raise CliError(str(exc)) from exc
             print(f"best buildable design of grid {args.ref}: {what}", file=sys.stderr)
             for line in passed_over:
                 print(f"  passed over {line}", file=sys.stderr)
