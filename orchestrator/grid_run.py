@@ -18,9 +18,15 @@ from linkevo.workers.trial_task import TrialOutcome
 
 def parent_run(client: MlflowClient, experiment_id: str, grid: Grid) -> str:
     """Returns the grid's parent run id, reusing an earlier launch's run on resume."""
-    existing = layout.grid_runs(client, experiment_id, grid.grid_id)
+    existing = layout.search(  # the first launch's run, which every resume reuses
+        client,
+        [experiment_id],
+        layout.where(layout.GRID, **{layout.GRID_ID: grid.grid_id}),
+        order_by=["attributes.start_time ASC"],
+        limit=1,
+    )
     if existing:
-        first = existing[-1]  # the first launch's run, which every resume reuses
+        first = existing[0]
         run_id = first.info.run_id
         client.update_run(run_id, status="RUNNING")
         if layout.ERROR in first.data.tags:  # the error of a launch that is over

@@ -18,7 +18,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Write linkage.json, linkage.png and build_sheet.md/.csv for RUN_ID (a "
             "trial's best linkage), RUN_ID:CELL or RUN_ID:B0,B1,... (one repertoire cell, "
-            "by flat index or bin coordinates), or with --best, the best trial of grid "
+            "by flat index or bin coordinates), or with --best, the best buildable design of grid "
             "GRID_ID. With --list, print the repertoire's best cells and their physical "
             "checks instead."
         ),

@@ -314,8 +314,8 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
             "the best loss, the coverage and the QD-score against evaluations, per "
             "approach. Coverage and QD-score are those of the repertoire for MAP-Elites and "
             "RANDOM (it only grows), and of the current population on a published grid "
-            "(MAP-LIS's unless configured) for "
-            "the EA and NSGA-II (it can fall), so the two kinds do not compare directly."
+            "(MAP-LIS's unless configured) for the EA and NSGA-II (it can fall), so the "
+            "two kinds do not compare directly."
         ),
         figure=fig,
     )

@@ -169,8 +169,10 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         findings += _against_random(grid, tests, [a for a in approaches if a != BASELINE])
     budget = grid.config.get("evaluations")
     if isinstance(budget, int) and budget < STUDY_EVALUATIONS:
-        judged = f"not judged: a pipeline check ({budget:,} of the study's {STUDY_EVALUATIONS:,} "
-        judged += "evaluations per trial)"
+        judged = (
+            f"not judged: a pipeline check ({budget:,} of the study's "
+            f"{STUDY_EVALUATIONS:,} evaluations per trial)"
+        )
         findings = [dataclasses.replace(f, verdict=judged) for f in findings]
     return findings
 

@@ -16,7 +16,6 @@ import pandas as pd
 from linkevo.orchestrator.config import ConfigError, from_dict
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
-from linkevo.workers.store.run_layout import BEST_JSON
 
 HISTORY_COLUMNS: tuple[str, ...] = (
     "iteration",
@@ -221,7 +220,7 @@ def _fetch_trial(
         archive = _artefact(row.artifact_uri, name, folder, tracking_uri)
         if archive is not None:
             break
-    return history, archive, _artefact(row.artifact_uri, BEST_JSON, folder, tracking_uri)
+    return history, archive, _artefact(row.artifact_uri, layout.BEST_JSON, folder, tracking_uri)
 
 
 def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:

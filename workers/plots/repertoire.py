@@ -10,8 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from matplotlib import colormaps
 from matplotlib.collections import LineCollection
-from matplotlib.colors import Normalize
+from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.figure import Figure
 
 from linkevo.algorithms.pareto import non_dominated_ranks
@@ -25,6 +26,9 @@ STRIP_PATHS = 5
 """Paths shown for EA (best of the final population) and NSGA-II (along the front)."""
 LOSS_CMAP = "viridis_r"
 """Low (good) losses bright yellow, high ones dark purple: the explorer's colours too."""
+PATH_CMAP = ListedColormap(colormaps[LOSS_CMAP](np.linspace(0.15, 1.0, 256)), "paths")
+"""The same scale for foot paths drawn as lines on white, less its palest yellow end (a
+pale yellow line would vanish on the page, and the best paths are the ones to see)."""
 LOSS_LABEL = "loss (brighter is lower, better)"
 CLIP_QUANTILE = 0.95
 """Loss colour scales end at this quantile of the losses shown."""
@@ -130,7 +134,7 @@ def draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize
             np.column_stack([col + 0.5 + (x - cx) * scale, row + 0.5 + (y - cy) * scale])
         )
         ax.text(col + 0.96, row + 0.04, f"{size:.1f}", ha="right", va="bottom", fontsize=5)
-    lines = LineCollection(segments, cmap=LOSS_CMAP, norm=norm, linewidths=0.9)
+    lines = LineCollection(segments, cmap=PATH_CMAP, norm=norm, linewidths=0.9)
     lines.set_array(chosen.loss.to_numpy(dtype=float))
     ax.add_collection(lines)
     rows, cols = shape
@@ -165,8 +169,8 @@ def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> N
     norm = loss_norm(archive.loss.to_numpy(dtype=float))
     if bins:
         fig = Figure(figsize=(8.0, 4.0))
-        heat = fig.add_axes((0.05, 0.08, 0.36, 0.82))
-        bar = fig.add_axes((0.43, 0.16, 0.012, 0.66))
+        heat = fig.add_axes((0.06, 0.12, 0.35, 0.78))
+        bar = fig.add_axes((0.43, 0.18, 0.012, 0.66))
         paths = fig.add_axes((0.54, 0.08, 0.42, 0.82))
         space = space_of(approach, len(bins))
         rows, cols, side = fold_bins(archive[bins].to_numpy(), space.resolution)
@@ -175,6 +179,13 @@ def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> N
         shown = heat.imshow(image, origin="lower", cmap=LOSS_CMAP, norm=norm)
         heat.set_title(f"{approach}: best loss per cell ({len(archive)} filled)", fontsize=8)
         heat.tick_params(labelsize=6)
+        names = space.names  # as fold_bins places them: outer › inner bins on each axis
+        x_axis, y_axis = (
+            (names[1], names[0]) if space.dims == 2
+            else (f"{names[1]} › {names[3]}", f"{names[0]} › {names[2]}")
+        )  # fmt: skip
+        heat.set_xlabel(f"{x_axis} (bin)", fontsize=6)
+        heat.set_ylabel(f"{y_axis} (bin)", fontsize=6)
         colour_bar = fig.colorbar(shown, cax=bar, extend="max")
         colour_bar.set_label(LOSS_LABEL, fontsize=6)
         colour_bar.ax.tick_params(labelsize=6)

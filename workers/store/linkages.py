@@ -88,7 +88,7 @@ def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
     tags = run.data.tags
     with tempfile.TemporaryDirectory() as tmp:
         if ref.cell is None and ref.bins is None:
-            path = _download(client, ref.run_id, "best_linkage.json", Path(tmp))
+            path = _download(client, ref.run_id, layout.BEST_JSON, Path(tmp))
             document, cell = json.loads(path.read_text(encoding="utf-8")), None
         else:
             table = repertoire(client, ref.run_id, Path(tmp))

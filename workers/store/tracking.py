@@ -8,6 +8,8 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
+from linkevo.workers.store import run_layout as layout
+
 DEFAULT_STORE_DIR = Path("runs")
 """Where the embedded store lives, relative to the working directory, unless told."""
 DEFAULT_EXPERIMENT = "linkevo"
@@ -126,10 +128,10 @@ def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
         client = MlflowClient(tracking_uri=uri)
         experiment = client.get_experiment_by_name(name)
         if experiment is not None:
-            if "mlflow.note.content" not in experiment.tags:  # a store made before it had one
+            if layout.NOTE not in experiment.tags:  # a store made before it had one
                 client.set_experiment_tag(
-                    experiment.experiment_id, "mlflow.note.content", EXPERIMENT_DESCRIPTION
+                    experiment.experiment_id, layout.NOTE, EXPERIMENT_DESCRIPTION
                 )
             return experiment.experiment_id
-        tags = EXPERIMENT_KIND | {"mlflow.note.content": EXPERIMENT_DESCRIPTION}
+        tags = EXPERIMENT_KIND | {layout.NOTE: EXPERIMENT_DESCRIPTION}
         return client.create_experiment(name, artifact_location=artifact_root_for(uri), tags=tags)
