@@ -25,7 +25,7 @@ from linkevo.orchestrator.fan_out import (
     signals_stop_the_grid,
 )
 from linkevo.orchestrator.grid import Grid, trial_dir, work_root
-from linkevo.orchestrator.grid_run import log_cell_summaries, parent_run
+from linkevo.orchestrator.grid_run import log_grid_summary, parent_run
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, warm_kernels
 from linkevo.orchestrator.reservation import Cluster, Reservation
@@ -230,7 +230,7 @@ def launch(
         outcome_of(finished[c.key]) if c.key in finished else ran[c.key] for c in grid.cells
     )
     status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
-    log_cell_summaries(client, parent_run_id, cfg, outcomes)
+    log_grid_summary(client, parent_run_id, grid, outcomes)
     client.set_terminated(parent_run_id, status)
     return GridResult(
         grid_id=grid.grid_id,

@@ -1,13 +1,12 @@
 """Provides the grid's parent run: created once and reused on resume, described for the
-MLflow UI, and given each cell's summary metrics."""
+MLflow UI, and given the summary of each approach and fitness."""
 
 from __future__ import annotations
 
 import socket
 import statistics
-import time
 
-from mlflow.entities import Metric, Param
+from mlflow.entities import Param
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.config import GridConfig, flatten, to_toml
@@ -49,41 +48,80 @@ def parent_run(client: MlflowClient, experiment_id: str, grid: Grid) -> str:
     return run_id
 
 
-def cell_summaries(config: GridConfig, outcomes: tuple[TrialOutcome, ...]) -> dict[str, float]:
-    """Returns the grid parent's summary metrics: per approach and fitness, over the
-    FINISHED trials, `<approach>/<fitness>/best_loss_median`, `.../best_loss_min`,
-    `.../coverage_median`, `.../qd_score_median` and `.../finished` (a count)."""
-    metrics: dict[str, float] = {}
+SUMMARY_COLUMNS = (
+    "approach",
+    "fitness",
+    "finished",
+    "trials",
+    "best_loss_min",
+    "best_loss_median",
+    "coverage_median",
+    "qd_score_median",
+)
+"""The grid summary's columns: per approach and fitness, the trials FINISHED of those
+run, and the best loss (min, median), coverage and QD-score (medians) over the finished
+ones (None where no finished trial has the number)."""
+
+
+def cell_summaries(
+    config: GridConfig, outcomes: tuple[TrialOutcome, ...]
+) -> list[dict[str, object]]:
+    """Returns one row (`SUMMARY_COLUMNS`) per approach and fitness, in config order."""
+    rows = []
     for approach in config.approaches:
         for fitness in config.fitnesses:
             cell = [
                 o
                 for o in outcomes
                 if layout.parse_trial_key(o.trial_key)[:2] == (approach, fitness)
-                and o.status == "FINISHED"
             ]
-            prefix = f"{approach}/{fitness}"
-            metrics[f"{prefix}/finished"] = float(len(cell))
+            done = [o for o in cell if o.status == "FINISHED"]
+            row: dict[str, object] = {
+                "approach": approach,
+                "fitness": fitness,
+                "finished": len(done),
+                "trials": len(cell),
+            }
             for name in ("best_loss", "coverage", "qd_score"):
-                values = [getattr(o, name) for o in cell if getattr(o, name) is not None]
-                if values:
-                    metrics[f"{prefix}/{name}_median"] = float(statistics.median(values))
-                if values and name == "best_loss":
-                    metrics[f"{prefix}/best_loss_min"] = float(min(values))
-    return metrics
+                values = [getattr(o, name) for o in done if getattr(o, name) is not None]
+                if name == "best_loss":
+                    row["best_loss_min"] = min(values) if values else None
+                row[f"{name}_median"] = statistics.median(values) if values else None
+            rows.append(row)
+    return rows
 
 
-def log_cell_summaries(
-    client: MlflowClient, run_id: str, config: GridConfig, outcomes: tuple[TrialOutcome, ...]
+def log_grid_summary(
+    client: MlflowClient, run_id: str, grid: Grid, outcomes: tuple[TrialOutcome, ...]
 ) -> None:
-    """Logs `cell_summaries` to the grid's parent run, so the MLflow UI's runs table shows
-    each cell's numbers next to the grid (a resumed grid logs them again, updated)."""
-    metrics = [
-        Metric(key, value, int(time.time() * 1000), 0)
-        for key, value in cell_summaries(config, outcomes).items()
+    """Logs the grid's summary to its parent run as one table (`layout.GRID_SUMMARY`) and
+    as a Markdown table in its description, which the MLflow UI shows on the run's page
+    (a resumed grid writes both again, updated)."""
+    rows = cell_summaries(grid.config, outcomes)
+    data = [[row[c] for c in SUMMARY_COLUMNS] for row in rows]
+    client.log_dict(run_id, {"columns": list(SUMMARY_COLUMNS), "data": data}, layout.GRID_SUMMARY)
+    client.set_tag(run_id, layout.NOTE, f"{grid_description(grid)}\n\n{summary_markdown(rows)}")
+
+
+def summary_markdown(rows: list[dict[str, object]]) -> str:
+    """Returns the summary rows as a Markdown table."""
+
+    def cell(value: object) -> str:
+        if not isinstance(value, float):
+            return "–" if value is None else str(value)
+        return f"{value:.4g}" if abs(value) < 1e4 else f"{value:,.0f}"
+
+    lines = [
+        "| approach | fitness | finished | best loss min | median | coverage | QD-score |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for start in range(0, len(metrics), 1000):
-        client.log_batch(run_id, metrics=metrics[start : start + 1000])
+    numbers = SUMMARY_COLUMNS[4:]
+    for r in rows:
+        values = " | ".join(cell(r[c]) for c in numbers)
+        lines.append(
+            f"| {r['approach']} | {r['fitness']} | {r['finished']}/{r['trials']} | {values} |"
+        )
+    return "\n".join(lines)
 
 
 def grid_description(grid: Grid) -> str:
@@ -97,9 +135,9 @@ def grid_description(grid: Grid) -> str:
         f"mode `{cfg.mode}`, target `{cfg.target}`, grid seed {cfg.seed}; code "
         f"`{grid.code_version}`.\n\n"
         "The nested runs are the trials (metrics per iteration, the final repertoire or "
-        "population, the best linkage). This run's metrics summarise each approach and "
-        "fitness: `<approach>/<fitness>/best_loss_median`, `best_loss_min`, "
-        "`coverage_median`, `qd_score_median`.\n\n"
+        "population, the best linkage). When the grid ends, the table below (and the "
+        f"artefact `{layout.GRID_SUMMARY}`) summarises each approach and fitness over its "
+        "finished trials.\n\n"
         f"Figures and statistics: `linkevo report {grid.grid_id}` (also logged here under "
         f"`report/`). A trial's linkage: `linkevo pull RUN_ID`, or `linkevo pull "
         f"{grid.grid_id} --best --fitness {cfg.fitnesses[0]}`. Resolved config: "

@@ -8,6 +8,7 @@ stopping a session stops exactly that process tree and nothing else on the machi
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import os
 import signal
 import socket
@@ -31,6 +32,14 @@ def spawn(command: list[str], log: Path, env: dict[str, str]) -> int:
             env=env, start_new_session=True,
         )  # fmt: skip
     return process.pid
+
+
+def stop_with_parent() -> None:
+    """Run in a child between fork and exec (`preexec_fn`): Linux sends it SIGTERM when the
+    process that started it dies, however it dies (SIGKILL included), so a server started
+    for a command never outlives that command."""
+    pr_set_pdeathsig = 1
+    ctypes.CDLL(None, use_errno=True).prctl(pr_set_pdeathsig, signal.SIGTERM)
 
 
 def answers(url: str) -> bool:

@@ -6,7 +6,6 @@ import argparse
 import json
 import shlex
 import signal
-import statistics
 import subprocess
 import sys
 from typing import TYPE_CHECKING
@@ -166,12 +165,17 @@ def _ui_flag(uri: str) -> str:
 
 def run_ui(args: argparse.Namespace) -> int:
     """Runs `mlflow ui` on the store, bound to 127.0.0.1, until Ctrl-C or SIGTERM, which
-    stop the server with it."""
-    from linkevo.orchestrator.process_sessions import in_use, stop_session
+    stop the server with it; killed outright, it takes the server with it too."""
+    from mlflow.tracking import MlflowClient
+
+    from linkevo.orchestrator.process_sessions import in_use, stop_session, stop_with_parent
     from linkevo.workers.store.tracking import (
+        DEFAULT_EXPERIMENT,
         artifact_root_for,
+        ensure_experiment,
         require_store,
         resolve_tracking_uri,
+        ui_address,
     )
 
     uri = resolve_tracking_uri(args.tracking_uri)
@@ -186,13 +190,17 @@ def run_ui(args: argparse.Namespace) -> int:
             f"--port {args.port}: not a free loopback port (another program listens there, "
             "or it is out of range); pass a free one, e.g. --port 5001"
         )
+    experiment_id = None
+    if MlflowClient(tracking_uri=uri).get_experiment_by_name(DEFAULT_EXPERIMENT) is not None:
+        experiment_id = ensure_experiment(uri)  # brings an older store's view up to date
     command = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri]
     artifacts = artifact_root_for(uri)
     if artifacts:
         command += ["--default-artifact-root", artifacts]
     command += ["--host", "127.0.0.1", "--port", str(args.port)]
-    print(f"MLflow UI on http://127.0.0.1:{args.port}  (Ctrl-C stops it)", file=sys.stderr)
-    server = subprocess.Popen(command, start_new_session=True)
+    address = ui_address(f"http://127.0.0.1:{args.port}", experiment_id)
+    print(f"MLflow UI on {address}  (Ctrl-C stops it)", file=sys.stderr)
+    server = subprocess.Popen(command, start_new_session=True, preexec_fn=stop_with_parent)
 
     def stop(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
@@ -232,7 +240,7 @@ def _fmt(value: float | None) -> str:
 def summary(result: GridResult, config: GridConfig) -> str:
     """Returns the end-of-grid table: per cell trials finished and best loss (min, median),
     then every failed trial with its error."""
-    from linkevo.workers.store import run_layout as layout
+    from linkevo.orchestrator.grid_run import cell_summaries
 
     lines = [
         f"grid {result.grid_id}: {len(result.outcomes) - len(result.failed)}/"
@@ -241,22 +249,12 @@ def summary(result: GridResult, config: GridConfig) -> str:
         "",
         f"{'approach':<9} {'fitness':<7} {'finished':>8} {'best loss min':>14} {'median':>10}",
     ]
-    for approach in config.approaches:
-        for fitness in config.fitnesses:
-            cell = [
-                o
-                for o in result.outcomes
-                if layout.parse_trial_key(o.trial_key)[:2] == (approach, fitness)
-            ]
-            losses = [
-                o.best_loss for o in cell if o.status == "FINISHED" and o.best_loss is not None
-            ]
-            done = sum(o.status == "FINISHED" for o in cell)
-            lines.append(
-                f"{approach:<9} {fitness:<7} {f'{done}/{len(cell)}':>8} "
-                f"{_fmt(min(losses) if losses else None):>14} "
-                f"{_fmt(statistics.median(losses) if losses else None):>10}"
-            )
+    for row in cell_summaries(config, result.outcomes):
+        done = f"{row['finished']}/{row['trials']}"
+        lines.append(
+            f"{row['approach']:<9} {row['fitness']:<7} {done:>8} "
+            f"{_fmt(row['best_loss_min']):>14} {_fmt(row['best_loss_median']):>10}"
+        )
     cut = [o.trial_key for o in result.outcomes if o.stopped_by == "max_seconds"]
     if cut:
         lines += [

@@ -84,11 +84,18 @@ def test_small_grid_ends_with_one_finished_run_per_trial_key(ray_local, tmp_path
     assert parent.data.tags["linkevo.kind"] == "grid"
     assert parent.data.tags["code_version"] == grid.code_version
     assert f"linkevo report {grid.grid_id}" in parent.data.tags["mlflow.note.content"]
-    assert parent.data.metrics["EA/Fp/finished"] == grid.config.trials
-    assert parent.data.metrics["MAP-LIS/Fsl/best_loss_min"] == min(
-        o.best_loss for o in result.outcomes if o.trial_key.startswith("MAP-LIS/Fsl/")
+    assert not parent.data.metrics  # the summary is one table, not loose metrics
+    path = client.download_artifacts(parent.info.run_id, "grid_summary.json", str(tmp_path))
+    table = json.loads(Path(path).read_text())
+    rows = {(r[0], r[1]): dict(zip(table["columns"], r, strict=True)) for r in table["data"]}
+    assert len(rows) == 4 and rows["EA", "Fp"]["finished"] == grid.config.trials
+    best = min(o.best_loss for o in result.outcomes if o.trial_key.startswith("MAP-LIS/Fsl/"))
+    assert rows["MAP-LIS", "Fsl"]["best_loss_min"] == best
+    assert rows["MAP-LIS", "Fp"]["qd_score_median"] is not None
+    assert (
+        f"| MAP-LIS | Fsl | {grid.config.trials}/{grid.config.trials} | {best:.4g} |"
+        in (parent.data.tags["mlflow.note.content"])
     )
-    assert "MAP-LIS/Fp/qd_score_median" in parent.data.metrics
     experiment = client.get_experiment(parent.info.experiment_id)
     assert experiment.tags["mlflow.experimentKind"] == "custom_model_development"
     assert parent.data.params["approaches"] == "['EA', 'MAP-LIS']"

@@ -26,10 +26,9 @@ from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.tracking import ensure_experiment
 from linkevo.workers.trial import TrialSpec, run_trial
 from linkevo.workers.trial_task import SPEC_PARAMS
+from tests.helpers.browser import chromium
 
 GRID = "e0e0e0e0e0e0"
-CHROMIUM = Path("/usr/bin/chromium")
-CHROMEDRIVER = Path("/usr/bin/chromedriver")
 
 
 @pytest.fixture(scope="module")
@@ -162,16 +161,8 @@ def test_explore_refuses_bad_input_before_writing(store, tmp_path, capsys):
 @pytest.fixture(scope="module")
 def browser():
     """A real headless Chromium."""
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    for argument in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000"):
-        options.add_argument(argument)
-    driver = webdriver.Chrome(options=options, service=Service(str(CHROMEDRIVER)))
-    yield driver
-    driver.quit()
+    with chromium() as driver:
+        yield driver
 
 
 def _open(browser, path: Path) -> None:

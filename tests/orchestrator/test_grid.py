@@ -2,15 +2,7 @@
 
 from __future__ import annotations
 
-import contextlib
-import json
-import os
-import signal
-import socket
-import subprocess
 import sys
-import time
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -18,8 +10,6 @@ import pytest
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.config import GridConfig
 from linkevo.orchestrator.grid import Grid, trial_seed
-from linkevo.orchestrator.process_sessions import processes_using
-from linkevo.workers.store.tracking import ensure_experiment
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
 
@@ -77,55 +67,6 @@ def test_dry_run_prints_the_plan_and_starts_nothing(tmp_path, capsys):
     assert "MAP-AU/Fsl/01" in out
     assert "trials = 2" in out
     assert not db.exists()
-
-
-def test_ui_serves_the_store_on_loopback(tmp_path):
-    uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
-    ensure_experiment(uri)
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port = sock.getsockname()[1]
-    code = "import sys; from linkevo.orchestrator.cli import main; sys.exit(main())"
-    ui = subprocess.Popen(
-        [sys.executable, "-c", code, "ui", "--tracking-uri", uri, "--port", str(port)],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 120
-        while True:
-            try:
-                with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2) as r:
-                    assert r.status == 200
-                    break
-            except OSError:
-                assert ui.poll() is None, "linkevo ui exited"
-                assert time.monotonic() < deadline, "the UI did not answer /health"
-                time.sleep(0.5)
-        request = f"http://127.0.0.1:{port}/ajax-api/2.0/mlflow/experiments/search?max_results=10"
-        with urllib.request.urlopen(request, timeout=10) as r:
-            names = [e["name"] for e in json.loads(r.read())["experiments"]]
-        assert "linkevo" in names
-        busy = subprocess.run(
-            [sys.executable, "-c", code, "ui", "--tracking-uri", uri, "--port", str(port)],
-            capture_output=True,
-            text=True,
-            timeout=60,
-        )
-        assert busy.returncode == 2 and f"--port {port}: not a free loopback port" in busy.stderr
-        ui.send_signal(signal.SIGTERM)  # to linkevo ui alone: it stops its server
-        assert ui.wait(timeout=60) == 0
-        with pytest.raises(OSError):
-            urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2)
-        deadline = time.monotonic() + 30
-        while processes_using(uri) and time.monotonic() < deadline:
-            time.sleep(0.2)
-        assert not processes_using(uri)  # no server process on the store is left
-    finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(ui.pid, signal.SIGKILL)
-        ui.wait(timeout=30)
 
 
 def test_the_commands_it_prints_run_as_this_one_was_run(monkeypatch, tmp_path):

@@ -40,6 +40,8 @@ STOPPED_BY = "stopped_by"
 
 GRID_CONFIG_JSON = "grid_config.json"
 GRID_CONFIG_TOML = "grid_config.toml"
+GRID_SUMMARY = "grid_summary.json"
+"""A grid parent's table of its cells (MLflow's table JSON: `columns` and `data`)."""
 BEST_JSON = "best_linkage.json"
 """A trial's best linkage, as `sim.linkage_doc` writes it."""
 REPERTOIRE = "repertoire.parquet"

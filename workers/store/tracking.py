@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import json
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -26,6 +27,30 @@ EXPERIMENT_DESCRIPTION = (
     "`linkevo report GRID_ID` gives the study's figures and statistics."
 )
 """The experiment's description in the MLflow UI (`mlflow.note.content`)."""
+RUNS_VIEW_KEY = "linkevo-trials"
+"""The name of the runs table's view that `linkevo ui` opens (`RUNS_VIEW`)."""
+RUNS_VIEW = {
+    "searchFilter": f"tags.`{layout.KIND}` = '{layout.TRIAL}'",
+    "selectedColumns": [
+        *(f"tags.`{tag}`" for tag in (layout.APPROACH, layout.FITNESS, layout.TRIAL_INDEX)),
+        *(f"metrics.`{metric}`" for metric in ("best_loss", "coverage", "qd_score")),
+        f"tags.`{layout.GRID_ID}`",
+    ],
+    "groupBy": {
+        "aggregateFunction": "min",
+        "groupByKeys": [{"mode": "tag", "groupByData": layout.GRID_ID}],
+    },
+}
+"""The runs table as `linkevo ui` opens it: every trial (grids' nested runs, not folded
+under their parent), with its approach, fitness, trial index, best loss, coverage and
+QD-score as columns. Stored as MLflow's own shared view (an experiment tag
+`mlflow.sharedViewState.<key>`, what the UI's "Share" button writes) and opened with
+`?viewStateShareKey=<key>`; the user's own column choices are untouched."""
+EXPERIMENT_TAGS = EXPERIMENT_KIND | {
+    layout.NOTE: EXPERIMENT_DESCRIPTION,
+    f"mlflow.sharedViewState.{RUNS_VIEW_KEY}": json.dumps(RUNS_VIEW),
+}
+"""Every tag the linkevo experiment carries; `ensure_experiment` adds the missing ones."""
 
 
 def default_tracking_uri(store_dir: Path | None = None) -> str:
@@ -116,8 +141,9 @@ def store_lock(uri: str) -> Iterator[None]:
 
 def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
     """Creates the store and experiment if needed (driver side, before any fan-out), as a
-    model-development experiment (`EXPERIMENT_KIND`) with a description
-    (`EXPERIMENT_DESCRIPTION`, added to an experiment without one); returns its id.
+    model-development experiment (`EXPERIMENT_KIND`) with a description and the runs
+    table's view (`EXPERIMENT_TAGS`, added to an older experiment that lacks them);
+    returns its id.
 
     The store's schema and the experiment are created under `store_lock`, so launches
     started together on a fresh store queue up instead of racing.
@@ -127,11 +153,23 @@ def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
     with store_lock(uri):
         client = MlflowClient(tracking_uri=uri)
         experiment = client.get_experiment_by_name(name)
-        if experiment is not None:
-            if layout.NOTE not in experiment.tags:  # a store made before it had one
-                client.set_experiment_tag(
-                    experiment.experiment_id, layout.NOTE, EXPERIMENT_DESCRIPTION
-                )
-            return experiment.experiment_id
-        tags = EXPERIMENT_KIND | {layout.NOTE: EXPERIMENT_DESCRIPTION}
-        return client.create_experiment(name, artifact_location=artifact_root_for(uri), tags=tags)
+        if experiment is None:
+            return client.create_experiment(
+                name, artifact_location=artifact_root_for(uri), tags=EXPERIMENT_TAGS
+            )
+        for key, value in EXPERIMENT_TAGS.items():  # an older linkevo's experiment
+            stored = experiment.tags.get(key)
+            if stored is None or (stored != value and key != layout.NOTE):  # keep user notes
+                client.set_experiment_tag(experiment.experiment_id, key, value)
+        return experiment.experiment_id
+
+
+def ui_address(base: str, experiment_id: str | None) -> str:
+    """Returns the MLflow UI address `linkevo ui` opens: the experiment's runs table in
+    the model-training view (`workflowType=machine_learning`, which MLflow otherwise keeps
+    per browser, defaulting to GenAI) with `RUNS_VIEW`; the experiment list when the
+    store holds no linkevo experiment yet."""
+    if experiment_id is None:
+        return f"{base}/#/experiments"
+    query = f"workflowType=machine_learning&viewStateShareKey={RUNS_VIEW_KEY}"
+    return f"{base}/#/experiments/{experiment_id}/runs?{query}"
