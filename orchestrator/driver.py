@@ -25,6 +25,7 @@ from linkevo.orchestrator.fan_out import (
     signals_stop_the_grid,
 )
 from linkevo.orchestrator.grid import Grid, trial_dir, work_root
+from linkevo.orchestrator.grid_lease import GridLease
 from linkevo.orchestrator.grid_run import log_grid_summary, parent_run
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, warm_kernels
@@ -140,8 +141,9 @@ def launch(
 
     Order: build and check every trial spec, check the tracking store, check that one
     trial's reservation fits (this machine's CPUs for a local instance, before Ray starts;
-    else the cluster's, once connected), create the MLflow database and experiment, mark
-    stale RUNNING runs KILLED (resume), plan the reservation for the trials left
+    else the cluster's, once connected), create the MLflow database and experiment,
+    take the grid's lease (`grid_lease`: one driver per grid), mark stale RUNNING runs
+    KILLED (resume), plan the reservation for the trials left
     (`orchestrator.reservation`), start a local Ray instance, warm the numba kernel, log
     (or on resume reuse) the grid's parent run, fan out one task per trial.
 
@@ -158,6 +160,7 @@ def launch(
     Raises:
         ConfigError: the store is unreachable, the grid already has trial runs and
             `resume` is False, or one trial's reservation does not fit the cluster.
+        GridBusy: another driver is running the grid.
     """
     start = time.monotonic()
     cfg = grid.config
@@ -172,10 +175,12 @@ def launch(
     else:
         started_ray = connect_ray(address, Cluster.this_machine())
         cluster = Cluster.of_ray()
+    lease = None
     try:
         Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
         client = MlflowClient(uri)
+        lease = GridLease.take(client, uri, experiment_id, grid.grid_id)
         earlier = layout.trial_runs(client, experiment_id, grid.grid_id)
         if earlier and not resume:
             raise ConfigError(
@@ -221,17 +226,19 @@ def launch(
             raise
         finally:
             view.close()
+        outcomes = tuple(
+            outcome_of(finished[c.key]) if c.key in finished else ran[c.key] for c in grid.cells
+        )
+        status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
+        log_grid_summary(client, parent_run_id, grid, outcomes)
+        client.set_terminated(parent_run_id, status)
     finally:
+        if lease is not None:
+            lease.release()
         if started_ray:
             import ray
 
             ray.shutdown()
-    outcomes = tuple(
-        outcome_of(finished[c.key]) if c.key in finished else ran[c.key] for c in grid.cells
-    )
-    status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
-    log_grid_summary(client, parent_run_id, grid, outcomes)
-    client.set_terminated(parent_run_id, status)
     return GridResult(
         grid_id=grid.grid_id,
         parent_run_id=parent_run_id,

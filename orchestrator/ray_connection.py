@@ -5,12 +5,48 @@ from __future__ import annotations
 import logging
 import os
 import signal
+import subprocess
+import sys
 import threading
 
 from linkevo.orchestrator.reservation import Cluster
 
 LOCAL_OBJECT_STORE_BYTES = 512 * 1024**2
 """Object store of a Ray instance the driver starts itself: the trial objects are small."""
+LOOPBACK_ENV = "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER"
+"""Ray's switch between a single-machine instance on the loopback address (its default on
+macOS and Windows) and a cluster node on the machine's network address (its default on
+Linux). Ray 2.60 ignores `ray.init(_node_ip_address="127.0.0.1")` for a local instance
+and binds its gRPC servers to every interface; with this switch off, the GCS, raylet,
+workers and agents listen on 127.0.0.1 only."""
+
+
+_reaper: subprocess.Popen | None = None
+
+
+def _loopback_only(local: bool) -> None:
+    """Sets Ray's loopback switch (`LOOPBACK_ENV`) for what this process starts or joins:
+    the environment for the processes Ray spawns, and Ray's own reading of it in this
+    process, which Ray takes once at import (so a process that ran a local grid can
+    still join a cluster afterwards)."""
+    from ray._private import ray_constants
+
+    if local:
+        os.environ[LOOPBACK_ENV] = "0"
+    else:
+        os.environ.pop(LOOPBACK_ENV, None)
+    ray_constants.ENABLE_RAY_CLUSTER = not local
+
+
+def _start_reaper() -> None:
+    """Starts, once per process, `orchestrator.reaper`: it stops what is left of this
+    process's local Ray instance when this process ends, however it ends."""
+    global _reaper
+    if _reaper is None:
+        _reaper = subprocess.Popen(
+            [sys.executable, "-m", "linkevo.orchestrator.reaper"],
+            stdin=subprocess.PIPE, start_new_session=True,
+        )  # fmt: skip
 
 
 def warm_kernels() -> None:
@@ -57,9 +93,12 @@ def connect_ray(address: str | None, cluster: Cluster) -> bool:
         return False
     in_main = threading.current_thread() is threading.main_thread()
     before = signal.getsignal(signal.SIGTERM) if in_main else None
-    if not uses_local_ray(address):
+    local = uses_local_ray(address)
+    _loopback_only(local)
+    if not local:
         ray.init(address=address)
     else:
+        _start_reaper()
         ray.init(
             address="local",
             num_cpus=int(cluster.total_cpus),

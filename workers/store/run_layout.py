@@ -38,6 +38,10 @@ ERROR_CHARS = 500
 STOPPED_BY = "stopped_by"
 """How a trial ended: "budget", or "max_seconds" when its time limit cut it short."""
 
+LEASE_PREFIX = "linkevo.lease."
+"""An experiment tag `linkevo.lease.<grid_id>`: the driver running that grid
+(`orchestrator.grid_lease`)."""
+
 GRID_CONFIG_JSON = "grid_config.json"
 GRID_CONFIG_TOML = "grid_config.toml"
 GRID_SUMMARY = "grid_summary.json"
@@ -59,6 +63,11 @@ PAGE = 1000
 def trial_key(approach: str, fitness: str, index: int) -> str:
     """Returns the trial key, e.g. "MAP-LIS/Fp/03": unique in a grid, stable across runs."""
     return f"{approach}/{fitness}/{index:02d}"
+
+
+def lease_tag(grid_id: str) -> str:
+    """Returns the experiment tag that holds a grid's lease."""
+    return f"{LEASE_PREFIX}{checked_id(grid_id, 'grid id')}"
 
 
 def parse_trial_key(key: str) -> tuple[str, str, int]:

@@ -1,0 +1,148 @@
+"""Provides `GridLease`: one driver per grid. A launch or resume takes the grid's lease in
+the store before it writes anything, renews it while it runs and hands it back at the end;
+a second driver on the same grid is refused while the lease is held.
+
+The lease is an experiment tag (`run_layout.lease_tag`) holding the holder's host, pid,
+start and last renewal, so it works on every store linkevo writes to (sqlite, a tracking
+server, a database). A holder that dies stops renewing: its lease expires `LEASE_TTL_S`
+after the last renewal, at once when it ran on this host and its process is gone, so a
+`--resume` after a crash needs no manual unlock.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import socket
+import threading
+import time
+import uuid
+from dataclasses import asdict, dataclass
+
+from mlflow.tracking import MlflowClient
+
+from linkevo.orchestrator.config import ConfigError
+from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.tracking import store_lock
+
+LEASE_TTL_S = 60.0
+"""A lease not renewed for this long is free."""
+RENEW_S = 10.0
+"""How often a running driver renews its lease."""
+CONFIRM_S = 1.0
+"""On a store without a file lock (a server), how long a new holder waits before reading
+the lease back: of two drivers that took it at once, the one whose write landed last
+keeps it and the other is refused."""
+
+
+class GridBusy(ConfigError):
+    """Another driver holds the grid's lease; the message says who and what to do."""
+
+
+@dataclass(frozen=True)
+class Holder:
+    """Who holds a grid's lease (times are seconds since the epoch)."""
+
+    host: str
+    pid: int
+    started: float
+    renewed: float
+    token: str
+
+    def alive(self, now: float) -> bool:
+        """Whether the lease still binds: renewed within the TTL by a process that (when
+        it ran on this host) still exists."""
+        if self.host == socket.gethostname() and not _process_exists(self.pid):
+            return False
+        return now - self.renewed < LEASE_TTL_S
+
+    def describe(self, now: float) -> str:
+        since = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(self.started))
+        return (
+            f"driver pid {self.pid} on {self.host}, running since {since}, last renewed "
+            f"{now - self.renewed:.0f} s ago"
+        )
+
+
+def _process_exists(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class GridLease:
+    """The lease of one grid, held by this process from `take` to `release`."""
+
+    def __init__(self, uri: str, experiment_id: str, grid_id: str, holder: Holder) -> None:
+        self._uri, self._experiment, self._grid = uri, experiment_id, grid_id
+        self._key = layout.lease_tag(grid_id)
+        self._holder = holder
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._renew, name="grid-lease", daemon=True)
+
+    @classmethod
+    def take(cls, client: MlflowClient, uri: str, experiment_id: str, grid_id: str) -> GridLease:
+        """Takes the grid's lease and starts renewing it.
+
+        Raises:
+            GridBusy: a live driver holds it (named, with what to do).
+        """
+        now = time.time()
+        me = Holder(socket.gethostname(), os.getpid(), now, now, uuid.uuid4().hex)
+        lease = cls(uri, experiment_id, grid_id, me)
+        with store_lock(uri):
+            lease._refuse_if_held(client, now)
+            lease._write(client, me)
+        if not uri.startswith("sqlite:///"):
+            time.sleep(CONFIRM_S)
+            lease._refuse_if_held(client, time.time())
+        lease._thread.start()
+        return lease
+
+    def release(self) -> None:
+        """Stops renewing and hands the lease back (if it is still this driver's)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+        client = MlflowClient(self._uri)
+        with contextlib.suppress(Exception):  # a store that went away keeps a lease that expires
+            current = self._read(client)
+            if current is not None and current.token == self._holder.token:
+                client.delete_experiment_tag(self._experiment, self._key)
+
+    def _refuse_if_held(self, client: MlflowClient, now: float) -> None:
+        current = self._read(client)
+        if current is None or current.token == self._holder.token or not current.alive(now):
+            return
+        expires = LEASE_TTL_S - (now - current.renewed)
+        raise GridBusy(
+            f"grid {self._grid} is being run by another {current.describe(now)}; two drivers "
+            "on one grid would undo each other's trials. Wait for it to finish (or stop it "
+            f"with Ctrl-C); if it died on another machine, its lease expires in {expires:.0f} "
+            "s and --resume then takes over"
+        )
+
+    def _read(self, client: MlflowClient) -> Holder | None:
+        tags = client.get_experiment(self._experiment).tags
+        text = tags.get(self._key)
+        if text is None:
+            return None
+        try:
+            return Holder(**json.loads(text))
+        except (TypeError, ValueError):
+            return None  # a damaged lease binds nobody
+
+    def _write(self, client: MlflowClient, holder: Holder) -> None:
+        client.set_experiment_tag(self._experiment, self._key, json.dumps(asdict(holder)))
+
+    def _renew(self) -> None:
+        client = MlflowClient(self._uri)
+        while not self._stop.wait(RENEW_S):
+            holder = Holder(**{**asdict(self._holder), "renewed": time.time()})
+            with contextlib.suppress(Exception):  # an unreachable store: try again next time
+                self._write(client, holder)

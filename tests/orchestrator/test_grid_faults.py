@@ -1,0 +1,128 @@
+"""The grid under faults, on real Ray and a real MLflow store: two drivers on one grid, a
+driver killed outright (what it listened on, what it left running) and resumed."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from mlflow.tracking import MlflowClient
+
+from linkevo.orchestrator import config
+from linkevo.orchestrator.grid import Grid
+from linkevo.orchestrator.grid_lease import LEASE_TTL_S, Holder
+from linkevo.orchestrator.reaper import stat_of, tree
+from linkevo.workers.store import run_layout as layout
+from tests.helpers.grid import runs_by_key, tiny_config_file
+from tests.helpers.sockets import is_loopback, listening_addresses
+
+CLI = "import sys; from linkevo.orchestrator.cli import main; sys.exit(main())"
+
+
+def _grid(tmp_path: Path) -> tuple[Path, str, str]:
+    """A tiny grid long enough to be caught running: its config file, store and id."""
+    uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
+    path = tiny_config_file(tmp_path, tracking_uri=uri, evaluations=3000, max_concurrent_trials=2)
+    return path, uri, Grid.from_config(config.load(path)).grid_id
+
+
+def _linkevo(*args: str, **popen) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-c", CLI, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        **popen,
+    )
+
+
+def _lease(uri: str, grid_id: str) -> Holder | None:
+    experiment = MlflowClient(uri).get_experiment_by_name("linkevo")
+    text = None if experiment is None else experiment.tags.get(layout.lease_tag(grid_id))
+    return None if text is None else Holder(**json.loads(text))
+
+
+def _wait_for(predicate, seconds: float, what: str) -> None:
+    deadline = time.monotonic() + seconds
+    while not predicate():
+        assert time.monotonic() < deadline, what
+        time.sleep(0.2)
+
+
+def test_a_lease_binds_while_renewed_by_a_live_process():
+    now = time.time()
+    me = Holder(os.uname().nodename, os.getpid(), now, now, "a")
+    assert me.alive(now)
+    assert not me.alive(now + LEASE_TTL_S + 1)  # not renewed: expired
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)  # fmt: skip
+    dead = Holder(os.uname().nodename, int(gone.stdout), now, now, "b")
+    assert not dead.alive(now)  # this host, its process gone: free at once
+    elsewhere = Holder("another-host", int(gone.stdout), now, now, "c")
+    assert elsewhere.alive(now)  # another host: bound until it expires
+
+
+def test_the_same_grid_launched_twice_runs_once(tmp_path):
+    path, uri, grid_id = _grid(tmp_path)
+    first = _linkevo("grid", str(path), "--no-progress")
+    try:
+        _wait_for(lambda: _lease(uri, grid_id) is not None, 120, "the first launch took no lease")
+        for extra in ([], ["--resume"]):
+            second = _linkevo("grid", str(path), "--no-progress", *extra)
+            _out, err = second.communicate(timeout=120)
+            assert second.returncode == 2, err
+            assert f"grid {grid_id} is being run by another driver pid {first.pid}" in err
+            assert "Traceback" not in err
+        _out, err = first.communicate(timeout=600)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert first.returncode == 0, err
+    runs = runs_by_key(uri, grid_id)
+    assert len(runs) == 8
+    assert all(statuses == [(statuses[0][0], "FINISHED")] for statuses in runs.values()), runs
+    assert _lease(uri, grid_id) is None  # handed back at the end
+
+
+def _alive(pids: set[int]) -> list[int]:
+    """The processes among `pids` still running (zombies run nothing and are left out)."""
+    return sorted(pid for pid in pids if stat_of(pid) is not None)
+
+
+def test_a_killed_driver_listened_on_loopback_left_nothing_and_is_resumed(tmp_path):
+    path, uri, grid_id = _grid(tmp_path)
+    first = _linkevo("grid", str(path), "--no-progress", start_new_session=True)
+    try:
+        _wait_for(
+            lambda: any(s == "FINISHED" for r in runs_by_key(uri, grid_id).values() for _, s in r),
+            300,
+            "no trial finished",
+        )
+        processes = set(tree(first.pid))  # the driver's Ray instance, trials and reaper
+        listening = listening_addresses(processes)
+        assert len(listening) >= 3, listening  # the GCS, the raylet, workers at least
+        assert all(is_loopback(a) for each in listening.values() for a in each), listening
+        os.kill(first.pid, signal.SIGKILL)  # the driver alone: no clean-up, lease left behind
+        first.wait(timeout=30)
+        deadline = time.monotonic() + 15
+        while (left := _alive(processes)) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert not left, f"outlived the driver by 15 s: {left}"
+        assert _lease(uri, grid_id).pid == first.pid
+        again = _linkevo("grid", str(path), "--no-progress", "--resume")
+        _out, err = again.communicate(timeout=600)
+        assert again.returncode == 0, err
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(first.pid, signal.SIGKILL)
+    runs = runs_by_key(uri, grid_id)
+    finished = [k for k, r in runs.items() if any(s == "FINISHED" for _, s in r)]
+    assert len(finished) == 8
+    assert all(sum(s == "FINISHED" for _, s in r) == 1 for r in runs.values())
+    assert _lease(uri, grid_id) is None
