@@ -85,6 +85,18 @@ def quiet_libraries() -> None:
     logging.getLogger(notice).setLevel(logging.ERROR)
 
 
+def _store_damage(exc: BaseException) -> str | None:
+    """Returns SQLite's words when `exc` (or what caused it) says the store's file is
+    damaged (past the header checks of `tracking.check_store_file`), else None."""
+    import sqlite3
+
+    while exc is not None:
+        if type(exc) is sqlite3.DatabaseError:  # not its subclasses: "locked" is not damage
+            return str(exc)
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """Runs the CLI and returns the process exit code."""
     quiet_libraries()
@@ -96,6 +108,16 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except (CliError, TrackingUriError) as exc:
         print(f"linkevo {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except Exception as exc:
+        damage = _store_damage(exc)
+        if damage is None:
+            raise
+        print(
+            f"linkevo {args.command}: error: the MLflow store is damaged ({damage}); restore "
+            "it from a backup, or move it away to start a new store",
+            file=sys.stderr,
+        )
         return 2
     except KeyboardInterrupt:
         print(f"linkevo {args.command}: interrupted", file=sys.stderr)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import difflib
+import math
+import os
 import tomllib
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
@@ -23,7 +25,16 @@ from linkevo.sim.study import (
 
 STUDY_TRIALS = 10
 """Trials per approach and fitness in the study."""
-"""The named F_p targets a grid may use."""
+MAX_ITERATIONS = 1_000_000
+"""The most iterations (evaluations / batch_size) a trial may run: each logs a row of
+metrics to MLflow and to metrics.csv, so a budget beyond it fills the store, not the
+archive (the study runs 146)."""
+BATCH_COPIES = 4
+"""Copies of a batch a trial holds at once (its genomes and evaluation in the trial, the
+evaluator and Ray's object store): the memory a batch needs is this many times
+`sim.evaluation.evaluation_bytes`."""
+MEMORY_SHARE = 0.5
+"""The share of this machine's memory one trial's batch may need."""
 EXECUTION_KEYS: frozenset[str] = frozenset(
     {
         "evaluators_per_trial",
@@ -133,10 +144,40 @@ def _check_int(cfg: GridConfig, key: str, minimum: int) -> None:
 
 def _check_number(cfg: GridConfig, key: str, minimum: float, strict: bool) -> None:
     value = getattr(cfg, key)
-    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
     if not ok or value < minimum or (strict and value == minimum):
         bound = f"> {minimum}" if strict else f">= {minimum}"
-        raise _fail(key, value, f"allowed: a number {bound}")
+        raise _fail(key, value, f"allowed: a finite number {bound}")
+
+
+def machine_memory() -> int:
+    """Returns this machine's memory in bytes."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def _check_size(cfg: GridConfig) -> None:
+    """Refuses a budget or batch this machine cannot hold (`MAX_ITERATIONS`,
+    `BATCH_COPIES`, `MEMORY_SHARE`), so a dry run catches it too."""
+    from linkevo.sim.evaluation import evaluation_bytes
+
+    if cfg.evaluations > cfg.batch_size * MAX_ITERATIONS:
+        raise _fail(
+            "evaluations",
+            cfg.evaluations,
+            f"allowed: at most batch_size x {MAX_ITERATIONS:,} = "
+            f"{cfg.batch_size * MAX_ITERATIONS:,} (each iteration logs a row of metrics)",
+        )
+    need = BATCH_COPIES * evaluation_bytes(cfg.batch_size, cfg.n_angles)
+    have = machine_memory()
+    if need > MEMORY_SHARE * have:
+        per_genome = BATCH_COPIES * evaluation_bytes(1, cfg.n_angles)
+        largest = int(MEMORY_SHARE * have // per_genome)
+        raise ConfigError(
+            f"config keys 'batch_size' = {cfg.batch_size:,} and 'n_angles' = "
+            f"{cfg.n_angles:,}: a batch needs about {need / 2**30:,.1f} GiB, more than half "
+            f"of this machine's {have / 2**30:.1f} GiB; allowed at n_angles = "
+            f"{cfg.n_angles:,}: batch_size <= {largest:,} (or fewer crank angles)"
+        )
 
 
 def _check_choices(cfg: GridConfig, key: str, allowed: tuple[str, ...], many: bool) -> None:
@@ -167,6 +208,7 @@ def _validate(cfg: GridConfig) -> None:
             raise _fail("trial_cpus", cfg.trial_cpus, allowed) from None
     if cfg.max_seconds is not None:
         _check_number(cfg, "max_seconds", 0.0, strict=True)
+    _check_size(cfg)
     _check_choices(cfg, "approaches", APPROACHES, many=True)
     _check_choices(cfg, "fitnesses", SINGLE_FITNESSES, many=True)
     _check_choices(cfg, "mode", MODES, many=False)
@@ -258,6 +300,11 @@ def load(path: Path | str, overrides: list[str] | None = None) -> GridConfig:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ConfigError(f"cannot read config file {str(path)!r}: {exc.strerror}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(
+            f"{path}: not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x}); "
+            "allowed: a TOML file saved as UTF-8"
+        ) from exc
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -7,12 +7,14 @@ The phases live beside it: `ray_connection` (a local instance or a cluster), `gr
 
 from __future__ import annotations
 
+import json
 import shutil
 import sys
 import time
 import urllib.error
 import urllib.request
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TextIO
 
 from mlflow.tracking import MlflowClient
@@ -24,13 +26,14 @@ from linkevo.orchestrator.fan_out import (
     fan_out,
     signals_stop_the_grid,
 )
-from linkevo.orchestrator.grid import Grid, trial_dir, work_root
+from linkevo.orchestrator.grid import Grid, grid_record, trial_dir, work_root
 from linkevo.orchestrator.grid_lease import GridLease
 from linkevo.orchestrator.grid_run import log_grid_summary, parent_run
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, warm_kernels
 from linkevo.orchestrator.reservation import Cluster, Reservation
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.artifacts import write_json_atomic
 from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
@@ -80,6 +83,27 @@ def check_tracking_uri(uri: str, timeout: float = 5.0) -> None:
         f"tracking URI {uri!r} is unreachable ({url}: {problem}); start the server, or "
         "allowed: an http(s):// MLflow server that answers /health, a sqlite:/// URI, "
         "or a folder for an embedded store"
+    )
+
+
+def check_store_holds_grid(record: Path, uri: str, grid: Grid) -> None:
+    """Refuses `--resume` on a store that holds no run of the grid when the grid's own
+    record (`grid.grid_record`) says it ran: the store was emptied or replaced, and a
+    resume would run every trial again beside the old files.
+
+    Raises:
+        ConfigError: naming both stores, the record and the choices.
+    """
+    try:
+        ran = json.loads(record.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return  # never launched here (or an unreadable record): nothing to protect
+    raise ConfigError(
+        f"--resume: the store {uri} holds no run of grid {grid.grid_id}, but {record} says "
+        f"it ran in {ran.get('tracking_uri')!r} as parent run {ran.get('parent_run_id')!r}: "
+        "the store was emptied or replaced. Resume against the store it ran in "
+        f"(--tracking-uri), or move {record.parent} away and launch the grid afresh "
+        "(same config, no --resume): its seeds make it the same grid"
     )
 
 
@@ -187,6 +211,9 @@ def launch(
                 f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {uri}; "
                 "pass --resume to complete it, or change the config (e.g. --set seed=1)"
             )
+        root = work_root(cfg, uri)
+        if resume and not earlier:
+            check_store_holds_grid(grid_record(root, grid), uri, grid)
         finished = {
             r.data.tags[layout.TRIAL_KEY]: r for r in earlier if r.info.status == "FINISHED"
         }
@@ -199,7 +226,6 @@ def launch(
                 f"--restart-trial {', '.join(done_restarts)}: already FINISHED; a finished "
                 "trial is kept (change the config for a new grid)"
             )
-        root = work_root(cfg, uri)
         for cell in grid.cells:
             if cell.key in restart:
                 shutil.rmtree(trial_dir(root, grid, cell), ignore_errors=True)
@@ -210,6 +236,9 @@ def launch(
         if todo:
             warm_kernels()
         parent_run_id = parent_run(client, experiment_id, grid)
+        record = {"grid_id": grid.grid_id, "tracking_uri": uri, "parent_run_id": parent_run_id}
+        grid_record(root, grid).parent.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(grid_record(root, grid), record)
         ctx = TrialContext(
             uri, experiment_id, parent_run_id, root, client, specs, reservation, started_ray
         )

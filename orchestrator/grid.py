@@ -129,6 +129,12 @@ def work_root(config: GridConfig, tracking_uri: str) -> Path:
     return Path("runs").resolve()
 
 
+def grid_record(root: Path, grid: Grid) -> Path:
+    """Returns the file beside a grid's trial folders that says which store and parent run
+    the grid's trials belong to (`grid.json`, written by the driver)."""
+    return root / "trials" / grid.grid_id / "grid.json"
+
+
 def trial_dir(root: Path, grid: Grid, cell: TrialCell) -> Path:
     """Returns a trial's folder for its files and checkpoints."""
     return root / "trials" / grid.grid_id / cell.dirname

@@ -55,10 +55,11 @@ def load_genomes(path: Path) -> np.ndarray:
     """Returns the validated (N, 56) genomes stored in a .npy file, or raises CliError."""
     if path.suffix != ".npy" or not path.is_file():
         raise CliError(f"genome file {str(path)!r} must be an existing .npy file")
-    try:
-        genomes = np.load(path, allow_pickle=False)
-    except ValueError as exc:
-        raise CliError(f"cannot read {str(path)!r} as a numeric .npy array: {exc}") from exc
+    try:  # mapped, not read: a header that claims more rows than the file holds is refused
+        genomes = np.array(np.load(path, mmap_mode="r", allow_pickle=False))
+    except (ValueError, EOFError, OSError) as exc:
+        reason = _npy_shortfall(path) or str(exc) or type(exc).__name__
+        raise CliError(f"cannot read {str(path)!r} as a numeric .npy array: {reason}") from exc
     try:
         genomes = validate_genomes(genomes)
     except GenomeError as exc:
@@ -66,6 +67,26 @@ def load_genomes(path: Path) -> np.ndarray:
     if len(genomes) == 0:
         raise CliError(f"{path} holds no genomes (shape {genomes.shape}); allowed: (N, 56), N >= 1")
     return genomes
+
+
+def _npy_shortfall(path: Path) -> str | None:
+    """Says why a .npy file is shorter than its header promises (empty, or a header that
+    claims more data than follows it); None when that is not the problem."""
+    size = path.stat().st_size
+    if size == 0:
+        return "it is empty"
+    try:
+        with open(path, "rb") as handle:
+            major, _ = np.lib.format.read_magic(handle)
+            read = np.lib.format.read_array_header_1_0
+            shape, _, dtype = (read if major == 1 else np.lib.format.read_array_header_2_0)(handle)
+            data = size - handle.tell()
+    except (ValueError, EOFError, OSError):
+        return None
+    claimed = int(np.prod(shape)) * dtype.itemsize
+    if claimed <= data:
+        return None
+    return f"its header claims shape {shape} of {dtype} ({claimed:,} bytes), {data:,} bytes follow"
 
 
 def check_writable(path: Path, suffixes: tuple[str, ...]) -> None:
@@ -77,10 +98,22 @@ def check_writable(path: Path, suffixes: tuple[str, ...]) -> None:
         raise CliError(f"output folder {str(folder)!r} does not exist")
 
 
-def check_angles(angles: int) -> None:
-    """Raises CliError unless `angles` (crank angles per turn) is at least MIN_ANGLES."""
+def check_angles(angles: int, n_genomes: int = 1) -> None:
+    """Raises CliError unless `angles` (crank angles per turn) is at least MIN_ANGLES and
+    the evaluation of `n_genomes` at that many angles fits in this machine's memory."""
+    from linkevo.orchestrator.config import MEMORY_SHARE, machine_memory
+    from linkevo.sim.evaluation import evaluation_bytes
+
     if angles < MIN_ANGLES:
         raise CliError(f"--angles must be >= {MIN_ANGLES}, got {angles}")
+    need, have = evaluation_bytes(n_genomes, angles), machine_memory()
+    if need > MEMORY_SHARE * have:
+        most = int(MEMORY_SHARE * have // evaluation_bytes(n_genomes, 1))
+        raise CliError(
+            f"--angles {angles:,}: {n_genomes:,} genome(s) need about {need / 2**30:,.1f} GiB "
+            f"at that many angles, more than half of this machine's {have / 2**30:.1f} GiB; "
+            f"allowed: --angles from {MIN_ANGLES} to about {most:,}"
+        )
 
 
 def run_eval(args: argparse.Namespace) -> int:
@@ -91,7 +124,7 @@ def run_eval(args: argparse.Namespace) -> int:
 
     genomes = load_genomes(args.genomes)
     check_writable(args.out, (".npz",))
-    check_angles(args.angles)
+    check_angles(args.angles, len(genomes))
     try:
         target = resolve_target(args.target)
     except ValueError as exc:

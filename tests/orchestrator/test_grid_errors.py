@@ -30,6 +30,12 @@ def closed_port() -> int:
         (None, "trial_cpus=64", "reserves 65 CPU"),
         (None, "evaluators_per_trial=0;trial_cpus=0", "'trial_cpus' = 0.0 is invalid"),
         (None, "options.MAP-AU.initial_epoch=3", "unknown option(s) 'initial_epoch' for MAP-AU"),
+        (None, "trial_cpus=nan", "'trial_cpus' = nan is invalid"),
+        (None, "max_seconds=inf", "'max_seconds' = inf is invalid: allowed: a finite number"),
+        (None, "batch_size=1000000000;evaluations=1000000000", "a batch needs about"),
+        (None, "n_angles=100000000", "'n_angles' = 100,000,000: a batch needs about"),
+        (None, "evaluations=1000000000000000", "allowed: at most batch_size x 1,000,000"),
+        ("trials = 2 # caf\xe9\n", None, "not UTF-8 text (byte 16 is 0xe9)"),
     ],
 )
 @pytest.mark.parametrize("dry_run", [False, True])
@@ -40,7 +46,7 @@ def test_bad_grid_input_fails_before_anything_starts(
     store = tmp_path / "store"
     path = tiny_config_file(tmp_path, tracking_uri=f"sqlite:///{store / 'm.db'}")
     if toml_text is not None:
-        path.write_text(toml_text)
+        path.write_bytes(toml_text.encode("latin-1"))
     args = ["grid", str(path), "--no-progress", *(["--dry-run"] if dry_run else [])]
     for one in [] if override is None else override.split(";"):
         args += ["--set", one.format(port=closed_port())]

@@ -6,12 +6,14 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import pytest
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator import config
@@ -19,6 +21,7 @@ from linkevo.orchestrator.grid import Grid
 from linkevo.orchestrator.grid_lease import LEASE_TTL_S, Holder
 from linkevo.orchestrator.reaper import stat_of, tree
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.tracking import ensure_experiment
 from tests.helpers.grid import runs_by_key, tiny_config_file
 from tests.helpers.sockets import is_loopback, listening_addresses
 
@@ -126,3 +129,68 @@ def test_a_killed_driver_listened_on_loopback_left_nothing_and_is_resumed(tmp_pa
     assert len(finished) == 8
     assert all(sum(s == "FINISHED" for _, s in r) == 1 for r in runs.values())
     assert _lease(uri, grid_id) is None
+
+
+@pytest.fixture(scope="module")
+def finished_grid(tmp_path_factory) -> tuple[Path, Path, str]:
+    """A finished tiny grid: its config, its store folder (store and trial folders), id."""
+    tmp = tmp_path_factory.mktemp("finished")
+    path, _uri, grid_id = _grid(tmp)
+    done = _linkevo("grid", str(path), "--no-progress")
+    _out, err = done.communicate(timeout=600)
+    assert done.returncode == 0, err
+    return path, tmp / "store", grid_id
+
+
+def _damaged_copy(finished_grid, tmp_path: Path, damage) -> tuple[list[str], Path]:
+    """Copies the finished grid's store folder, damages the store file; returns the
+    `--set` arguments that point the grid's config at the copy, and the copy's store."""
+    _path, store, _grid_id = finished_grid
+    copy = tmp_path / "store"
+    shutil.copytree(store, copy)
+    damage(copy / "mlflow.db")
+    return ["--set", f'tracking_uri="sqlite:///{copy / "mlflow.db"}"'], copy / "mlflow.db"
+
+
+def _refused(args: list[str]) -> str:
+    run = subprocess.run(
+        [sys.executable, "-c", CLI, *args], capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == 2, run.stderr
+    assert "Traceback" not in run.stderr
+    return run.stderr
+
+
+@pytest.mark.parametrize(
+    ("damage", "expected"),
+    [
+        (lambda db: db.write_bytes(b""), "is empty (0 bytes)"),
+        (lambda db: os.truncate(db, db.stat().st_size // 2), "is damaged"),
+        (lambda db: db.write_bytes(b"not a database" * 10), "is not an MLflow (SQLite) store"),
+    ],
+)
+def test_a_damaged_store_is_refused_with_its_path_and_nothing_runs(
+    finished_grid, tmp_path, damage, expected
+):
+    path, _store, grid_id = finished_grid
+    uri_args, db = _damaged_copy(finished_grid, tmp_path, damage)
+    before = db.read_bytes()
+    for args in (
+        ["grid", str(path), "--resume", "--no-progress", *uri_args],
+        ["report", grid_id, "--tracking-uri", str(db.parent), "--out", str(tmp_path / "r")],
+        ["ui", "--tracking-uri", f"sqlite:///{db}", "--port", "1"],
+    ):
+        err = _refused(args)
+        assert expected in err and str(db) in err, err
+    assert db.read_bytes() == before  # not re-initialised, not written
+    assert not (tmp_path / "r").exists()
+
+
+def test_resume_on_a_replaced_store_is_refused_saying_where_the_grid_ran(finished_grid, tmp_path):
+    path, _store, grid_id = finished_grid
+    uri_args, db = _damaged_copy(finished_grid, tmp_path, lambda db: db.unlink())
+    ensure_experiment(f"sqlite:///{db}")  # a new, valid store in its place
+    err = _refused(["grid", str(path), "--resume", "--no-progress", *uri_args])
+    assert f"holds no run of grid {grid_id}" in err
+    assert str(db.parent / "trials" / grid_id / "grid.json") in err
+    assert not runs_by_key(f"sqlite:///{db}", grid_id)  # nothing ran again

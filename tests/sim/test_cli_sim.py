@@ -90,10 +90,23 @@ def test_eval_reads_a_user_target_file(linkevo, genome_file, tmp_path):
         (np.full((2, 56), 0.5), ["--target", "nowhere.json"], "neither a published target"),
         (np.zeros((0, 56)), [], "holds no genomes (shape (0, 56))"),
         (np.full((2, 56), 0.5), ["--angles", "1"], "--angles must be >= 3, got 1"),
+        (np.full((2, 56), 0.5), ["--angles", "1000000000"], "--angles 1,000,000,000: 2 genome"),
+        (b"", [], "cannot read 'g.npy' as a numeric .npy array: it is empty"),
+        ("claims", [], "its header claims shape (1000000000, 56) of float64"),
     ],
 )
 def test_eval_refuses_bad_input_before_work(linkevo, tmp_path, content, args, message):
-    np.save(tmp_path / "g.npy", content)
+    if isinstance(content, bytes):
+        (tmp_path / "g.npy").write_bytes(content)
+    elif isinstance(content, str):  # a header that claims 10^9 rows over 2 rows of data
+        np.save(tmp_path / "g.npy", np.full((2, 56), 0.5))
+        raw = (tmp_path / "g.npy").read_bytes()
+        header = raw[: raw.index(b"\n") + 1]
+        claimed = header.replace(b"(2, 56)", b"(1000000000, 56)")
+        claimed = claimed[: len(header) - 1].ljust(len(header) - 1) + b"\n"
+        (tmp_path / "g.npy").write_bytes(claimed + raw[len(header) :])
+    else:
+        np.save(tmp_path / "g.npy", content)
     out = tmp_path / "r.npz"
     done = linkevo("eval", "g.npy", "--out", str(out), *args, cwd=tmp_path)
     assert done.returncode == 2
@@ -121,11 +134,18 @@ def test_show_draws_png_and_gif_from_npy_and_json(linkevo, genome_file, tmp_path
     assert bad.returncode == 2 and "999" in bad.stderr
 
 
-@pytest.mark.parametrize("angles", ["0", "2"])
-def test_show_refuses_fewer_than_three_angles(linkevo, genome_file, tmp_path, angles):
+@pytest.mark.parametrize(
+    ("angles", "message"),
+    [
+        ("0", "--angles must be >= 3, got 0"),
+        ("2", "--angles must be >= 3, got 2"),
+        ("1000000000", "more than half of this machine's"),
+    ],
+)
+def test_show_refuses_absurd_angle_counts(linkevo, genome_file, tmp_path, angles, message):
     out = tmp_path / "l.png"
     path, _ = genome_file
     done = linkevo("show", str(path), "--angles", angles, "--out", str(out), cwd=tmp_path)
     assert done.returncode == 2
-    assert f"--angles must be >= 3, got {angles}" in done.stderr and "Traceback" not in done.stderr
+    assert message in done.stderr and "Traceback" not in done.stderr
     assert not out.exists()

@@ -106,7 +106,54 @@ def require_store(uri: str) -> str:
             f"no MLflow store at {uri.removeprefix('sqlite:///')}; run a grid first "
             "(linkevo grid configs/quick.toml) or pass --tracking-uri"
         )
+    check_store_file(uri)
     return uri
+
+
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def check_store_file(uri: str) -> None:
+    """Refuses an embedded sqlite store that is damaged, before anything reads or writes it
+    (a missing file is fine: a writer creates it).
+
+    MLflow itself would re-create the schema in an emptied file (so a `--resume` would run
+    the whole grid again beside its orphaned files) and fail deep inside SQLAlchemy on a
+    truncated one. Checked here: a file of zero bytes, a file that is not SQLite, and one
+    shorter than the page count its header states (a truncated copy or a full disk).
+
+    Raises:
+        TrackingUriError: naming the file, what is wrong and what to do.
+    """
+    if not uri.startswith("sqlite:///"):
+        return
+    path = Path(uri.removeprefix("sqlite:///"))
+    try:
+        size = path.stat().st_size
+        with open(path, "rb") as handle:
+            header = handle.read(100)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise TrackingUriError(f"cannot read the MLflow store {path}: {exc.strerror}") from exc
+    remedy = (
+        "restore it from a backup (or the copy the grid ran on), or move it away to start "
+        "a new store; the trial folders and artefacts beside it are kept"
+    )
+    if size == 0:
+        raise TrackingUriError(f"the MLflow store {path} is empty (0 bytes); {remedy}")
+    if not header.startswith(SQLITE_MAGIC) or len(header) < 100:
+        raise TrackingUriError(f"{path} is not an MLflow (SQLite) store; {remedy}")
+    page_size = int.from_bytes(header[16:18], "big")
+    page_size = 65536 if page_size == 1 else page_size
+    pages = int.from_bytes(header[28:32], "big")
+    stated = header[92:96] == header[24:28]  # the header's page count is current
+    if stated and size < pages * page_size:
+        raise TrackingUriError(
+            f"the MLflow store {path} is damaged: {size:,} bytes where its header states "
+            f"{pages * page_size:,} (truncated, e.g. by a full disk or a partial copy); "
+            f"{remedy}"
+        )
 
 
 def artifact_root_for(uri: str) -> str | None:
@@ -150,6 +197,7 @@ def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
     """
     from mlflow.tracking import MlflowClient
 
+    check_store_file(uri)
     with store_lock(uri):
         client = MlflowClient(tracking_uri=uri)
         experiment = client.get_experiment_by_name(name)
