@@ -322,9 +322,11 @@ class Hexapod:
     def shutdown(self) -> list[str]:
         """Stops every motor: Goal Velocity 0, torque off, port closed. Idempotent.
 
-        Every step is attempted even when an earlier one fails; the failures are
-        returned, naming the motor, for every motor that answered at start-up (one that
-        never answered cannot hold torque).
+        Every step is attempted even when an earlier one fails; each motor's Goal
+        Velocity and Torque Enable are read back and logged, one line per motor (INFO:
+        stopped; ERROR: what failed). The failures are returned, naming the motor, for
+        every motor that answered at start-up (one that never answered cannot hold
+        torque).
         """
         if not self._open:
             return []
@@ -337,11 +339,26 @@ class Hexapod:
             self.bus.sync_write(ct.GOAL_VELOCITY, dict.fromkeys(self._ids, 0))
         except (HardwareError, OSError) as exc:
             problems.append(str(exc))
+        names = {
+            m.id: f"motor {m.id}" + (f" ({m.name})" if m.name else "") for m in self.config.motors
+        }
         for motor_id in self._ids:
             try:
                 self.bus.write(motor_id, ct.TORQUE_ENABLE, 0)
+                velocity = self.bus.read(motor_id, ct.GOAL_VELOCITY)
+                torque = self.bus.read(motor_id, ct.TORQUE_ENABLE)
             except (HardwareError, OSError) as exc:
                 if motor_id in self._reached:
                     problems.append(f"torque off failed: {exc}")
+                    _log.error("stop: %s: torque off failed: %s", names[motor_id], exc)
+                continue
+            if velocity == 0 and torque == 0:
+                _log.info("stop: %s: Goal Velocity 0, torque off (read back)", names[motor_id])
+            else:
+                problem = (
+                    f"{names[motor_id]} reads back Goal Velocity {velocity}, Torque Enable {torque}"
+                )
+                problems.append(problem)
+                _log.error("stop: %s", problem)
         self.bus.close()
         return problems

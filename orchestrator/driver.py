@@ -251,7 +251,7 @@ def launch(
                 exc.finished += len(finished)
             for run in layout.trial_runs(client, experiment_id, grid.grid_id, status="RUNNING"):
                 end_run(client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
-            end_run(client, parent_run_id, "KILLED", f"{type(exc).__name__}: {exc}")
+            end_run(client, parent_run_id, "KILLED", layout.error_text(exc))
             raise
         finally:
             view.close()

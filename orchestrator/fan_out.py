@@ -82,13 +82,13 @@ def lost_trial(
     ctx: TrialContext, grid_id: str, cell: TrialCell, exc: BaseException
 ) -> TrialOutcome:
     """Returns the outcome of a trial whose task failed past its retries; ends its run."""
-    message = f"{type(exc).__name__}: {exc}"
+    message = layout.error_text(exc)
     runs = layout.trial_runs(ctx.client, ctx.experiment_id, grid_id, trial_key=cell.key)
     for run in runs:
         if run.info.status == "RUNNING":
             end_run(ctx.client, run.info.run_id, "FAILED", message)
     run_id = runs[0].info.run_id if runs else ""
-    return TrialOutcome(cell.key, "FAILED", run_id, None, None, 0.0, message[: layout.ERROR_CHARS])
+    return TrialOutcome(cell.key, "FAILED", run_id, None, None, 0.0, message)
 
 
 @contextlib.contextmanager

@@ -144,10 +144,6 @@ def outcome_of(run: Run, seconds: float = 0.0) -> TrialOutcome:
     )
 
 
-def _describe(exc: BaseException) -> str:
-    return f"{type(exc).__name__}: {exc}"
-
-
 def _flush_quietly(recorder: MlflowRecorder) -> None:
     # The trial already failed; its own error is the one to report.
     with contextlib.suppress(Exception):
@@ -202,11 +198,11 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by)
     except RETRYABLE_ERRORS as exc:
         _flush_quietly(recorder)
-        end_run(client, run_id, "KILLED", _describe(exc))
+        end_run(client, run_id, "KILLED", layout.error_text(exc))
         raise
     except Exception as exc:
         _flush_quietly(recorder)
-        end_run(client, run_id, "FAILED", _describe(exc))
+        end_run(client, run_id, "FAILED", layout.error_text(exc))
         return outcome_of(client.get_run(run_id), time.monotonic() - start)
     finally:
         if pool is not None:

@@ -4,6 +4,7 @@ print the study's Table I."""
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import signal
 import sys
@@ -146,12 +147,24 @@ def _exit_code(signal_name: str) -> int:
     return 128 + int(getattr(signal, signal_name))
 
 
+def show_motor_stops() -> None:
+    """Prints on stderr each motor's stop as the hexapod reads it back (Goal Velocity 0,
+    torque off, or what failed): one line per motor when a walk ends, however it ends."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log = logging.getLogger("linkevo.hardware.hexapod")
+    log.setLevel(logging.INFO)
+    log.addHandler(handler)
+    log.propagate = False
+
+
 def walk_handler(args: argparse.Namespace) -> int:
     """Walks once and prints the achieved tick rate."""
     from linkevo.hardware.errors import HardwareError, ShutdownIncomplete, StopRequested
     from linkevo.hardware.session import run_walk
 
     config = load_robot(args)
+    show_motor_stops()
     try:
         result = run_walk(config, args.seconds, telemetry=args.telemetry, simulate=args.simulate)
     except ShutdownIncomplete as exc:

@@ -78,6 +78,8 @@ def test_sigint_to_a_walking_process_leaves_motors_stopped(emulator, config_file
     for motor_id, state in emu.snapshots().items():
         assert state.goal_velocity == 0, motor_id
         assert not state.torque_enabled, motor_id
+        line = next(x for x in err.splitlines() if x.startswith(f"stop: motor {motor_id} "))
+        assert line.endswith(": Goal Velocity 0, torque off (read back)"), err
 
 
 def test_bad_config_is_a_usage_error_naming_the_value(tmp_path, capsys):

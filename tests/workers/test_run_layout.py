@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sqlite3
+
 import pytest
 from mlflow.tracking import MlflowClient
 
@@ -50,3 +52,15 @@ def test_search_pages_through_every_run(tmp_path, monkeypatch):
     assert len(layout.search(client, [experiment], layout.where(layout.TRIAL), limit=4)) == 4
     one = layout.trial_runs(client, experiment, "g1", trial_key="EA/Fp/05")
     assert [r.data.tags[layout.TRIAL_KEY] for r in one] == ["EA/Fp/05"]
+
+
+def test_an_error_tag_holds_the_message_not_the_sql():
+    import sqlalchemy.exc
+
+    orig = sqlite3.OperationalError("database or disk is full")
+    exc = sqlalchemy.exc.OperationalError("INSERT INTO metrics VALUES (?, ?)", ("a", 1), orig)
+    text = layout.error_text(exc)
+    assert text == "OperationalError: (sqlite3.OperationalError) database or disk is full"
+    long = layout.error_text(OSError(28, "No space left on device", "/runs/trials/x" * 100))
+    assert long.startswith("OSError: [Errno 28] No space left on device: '/runs/trials/x")
+    assert len(long) == layout.ERROR_CHARS

@@ -65,6 +65,15 @@ def trial_key(approach: str, fitness: str, index: int) -> str:
     return f"{approach}/{fitness}/{index:02d}"
 
 
+def error_text(exc: BaseException) -> str:
+    """Returns the `error` tag of a run that `exc` ended: its type and message, first
+    `ERROR_CHARS` characters, with a database error's SQL statement and parameters left
+    out (SQLAlchemy appends them after the message; they say nothing to a user and can
+    be long)."""
+    message = str(exc).split("\n[SQL:", 1)[0].split("\n(Background on this error", 1)[0]
+    return f"{type(exc).__name__}: {message.strip()}"[:ERROR_CHARS]
+
+
 def lease_tag(grid_id: str) -> str:
     """Returns the experiment tag that holds a grid's lease."""
     return f"{LEASE_PREFIX}{checked_id(grid_id, 'grid id')}"
