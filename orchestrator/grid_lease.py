@@ -24,6 +24,7 @@ from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.config import ConfigError
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.artifacts import process_alive
 from linkevo.workers.store.tracking import store_lock
 
 LEASE_TTL_S = 60.0
@@ -53,7 +54,7 @@ class Holder:
     def alive(self, now: float) -> bool:
         """Whether the lease still binds: renewed within the TTL by a process that (when
         it ran on this host) still exists."""
-        if self.host == socket.gethostname() and not _process_exists(self.pid):
+        if self.host == socket.gethostname() and not process_alive(self.pid):
             return False
         return now - self.renewed < LEASE_TTL_S
 
@@ -63,16 +64,6 @@ class Holder:
             f"driver pid {self.pid} on {self.host}, running since {since}, last renewed "
             f"{now - self.renewed:.0f} s ago"
         )
-
-
-def _process_exists(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 class GridLease:

@@ -19,9 +19,8 @@ macOS and Windows) and a cluster node on the machine's network address (its defa
 Linux). Ray 2.60 ignores `ray.init(_node_ip_address="127.0.0.1")` for a local instance
 and binds its gRPC servers to every interface; with this switch off, the GCS, raylet,
 workers and agents listen on 127.0.0.1 only."""
-
-
 _reaper: subprocess.Popen | None = None
+"""This process's reaper (`orchestrator.reaper`), once a local instance was started."""
 
 
 def _loopback_only(local: bool) -> None:

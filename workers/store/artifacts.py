@@ -25,7 +25,8 @@ def _temp_name(path: Path) -> Path:
     )
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether a process with this pid runs on this host (as any user)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -43,7 +44,7 @@ def sweep_stale_temps(path: Path) -> list[Path]:
     swept = []
     for candidate in path.parent.glob(f"{prefix}*{path.suffix}"):
         pid = candidate.name.removeprefix(prefix).partition("-")[0]
-        if pid.isdigit() and not _alive(int(pid)):
+        if pid.isdigit() and not process_alive(int(pid)):
             candidate.unlink(missing_ok=True)
             swept.append(candidate)
     return swept
