@@ -149,13 +149,20 @@ def _exit_code(signal_name: str) -> int:
 
 def show_motor_stops() -> None:
     """Prints on stderr each motor's stop as the hexapod reads it back (Goal Velocity 0,
-    torque off, or what failed): one line per motor when a walk ends, however it ends."""
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("%(message)s"))
+    torque off, or what failed): one line per motor when a walk ends, however it ends
+    (`hexapod walk` and each repeat of `hexapod trial`)."""
     log = logging.getLogger("linkevo.hardware.hexapod")
     log.setLevel(logging.INFO)
-    log.addHandler(handler)
     log.propagate = False
+    if not any(isinstance(h, _Stderr) for h in log.handlers):
+        log.addHandler(_Stderr())
+
+
+class _Stderr(logging.Handler):
+    """Writes a record's message to the current `sys.stderr`."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        print(record.getMessage(), file=sys.stderr)
 
 
 def walk_handler(args: argparse.Namespace) -> int:
@@ -231,6 +238,7 @@ def trial_handler(args: argparse.Namespace) -> int:
         if bad:
             raise CliError(f"--distance-cm {bad}: allowed finite values >= 0")
     config = load_robot(args)
+    show_motor_stops()
     uri = resolve_tracking_uri(args.tracking_uri)
     try:
         source = load_source(MlflowClient(tracking_uri=uri), LinkageRef.parse(args.linkage))
