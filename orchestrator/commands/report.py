@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
@@ -64,7 +65,7 @@ def _store_options(parser: argparse.ArgumentParser) -> None:
 
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
-    from linkevo.orchestrator.report import GridNotFoundError, build_report
+    from linkevo.orchestrator.report import GridNotFoundError, ReportNotLogged, build_report
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     if args.grid_id is not None and not layout.ID_PATTERN.fullmatch(args.grid_id):
@@ -85,6 +86,9 @@ def handler(args: argparse.Namespace) -> int:
         )
     except GridNotFoundError as exc:
         raise CliError(str(exc)) from exc
+    except ReportNotLogged as exc:
+        print(f"linkevo report: {exc}", file=sys.stderr)
+        return 1
     print(f"grid {result.grid_id}: report at {result.html}")
     for finding in result.findings:
         print(f"  [{finding.verdict}] {finding.claim} {finding.evidence}")

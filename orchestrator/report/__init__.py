@@ -1,6 +1,13 @@
 """Reports: a grid's comparison figures, statistics and findings, read from MLflow."""
 
-from linkevo.orchestrator.report.build import ReportResult, build_report
+from linkevo.orchestrator.report.build import ReportNotLogged, ReportResult, build_report
 from linkevo.orchestrator.report.load import GridData, GridNotFoundError, load_grid
 
-__all__ = ["GridData", "GridNotFoundError", "ReportResult", "build_report", "load_grid"]
+__all__ = [
+    "GridData",
+    "GridNotFoundError",
+    "ReportNotLogged",
+    "ReportResult",
+    "build_report",
+    "load_grid",
+]

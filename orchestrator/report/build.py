@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
+import os
+import secrets
+import shutil
 import tempfile
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -104,12 +109,66 @@ def build_report(
     with tempfile.TemporaryDirectory(prefix="linkevo-report-") as cache:
         grid = load_grid(tracking_uri, grid_id, Path(cache), experiment)
         out = Path(out_dir) if out_dir is not None else Path("reports") / grid.grid_id
-        out.mkdir(parents=True, exist_ok=True)
         summary = summary_table(grid.trials)
         tests = pairwise_tests(grid.trials)
         findings = tuple(check_findings(grid, tests))
         checks = best_linkage_checks(grid)
         made = report_figures(grid)
+    with _staged(out) as staging:
+        written = _write_report(grid, tracking_uri, summary, tests, findings, checks, made, staging)
+    files = [out / path.name for path in written]
+    html_path = out / "report.html"
+    if log_to_mlflow:
+        from mlflow.tracking import MlflowClient
+
+        client = MlflowClient(tracking_uri=tracking_uri)
+        try:
+            for path in files:
+                client.log_artifact(grid.parent_run_id, str(path), REPORT_ARTIFACT_DIR)
+        except Exception as exc:
+            raise ReportNotLogged(
+                f"the report is complete in {out}, but logging it to parent run "
+                f"{grid.parent_run_id} failed ({type(exc).__name__}: {exc}); rerun when the "
+                "store is writable, or pass --no-log"
+            ) from exc
+    return ReportResult(
+        grid_id=grid.grid_id,
+        parent_run_id=grid.parent_run_id,
+        out_dir=out,
+        html=html_path,
+        files=tuple(files),
+        summary=summary,
+        tests=tests,
+        findings=findings,
+    )
+
+
+class ReportNotLogged(RuntimeError):
+    """The report's folder is written, its logging to MLflow failed; says where it is."""
+
+
+@contextlib.contextmanager
+def _staged(out: Path) -> Iterator[Path]:
+    """Yields a new staging folder beside `out`; when the block succeeds, its files are
+    moved into `out` one rename each (other files in `out` are left alone), so a report
+    that fails half-way (a full disk, an interrupt) leaves the previous one as it was.
+    When the block fails, the staging folder is removed."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    staging = out.with_name(f".{out.name}.new-{os.getpid()}-{secrets.token_hex(4)}")
+    staging.mkdir()
+    try:
+        yield staging
+        out.mkdir(exist_ok=True)
+        for path in sorted(staging.iterdir()):
+            path.replace(out / path.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+
+
+def _write_report(
+    grid, tracking_uri, summary, tests, findings, checks, made, out: Path
+) -> list[Path]:
+    """Writes the report's files into `out`; returns them (report.html last)."""
     files: list[Path] = []
     embedded = []
     for item in made:
@@ -149,19 +208,4 @@ def build_report(
     html_path = out / "report.html"
     write_bytes_atomic(html_path, page.encode("utf-8"))
     files.append(html_path)
-    if log_to_mlflow:
-        from mlflow.tracking import MlflowClient
-
-        client = MlflowClient(tracking_uri=tracking_uri)
-        for path in files:
-            client.log_artifact(grid.parent_run_id, str(path), REPORT_ARTIFACT_DIR)
-    return ReportResult(
-        grid_id=grid.grid_id,
-        parent_run_id=grid.parent_run_id,
-        out_dir=out,
-        html=html_path,
-        files=tuple(files),
-        summary=summary,
-        tests=tests,
-        findings=findings,
-    )
+    return files

@@ -388,3 +388,30 @@ def test_compare_puts_two_grids_side_by_side(tmp_path, capsys):
     assert pd.read_csv(out).shape == (8, 13)
     assert main(["compare", "g0first", "nope", "--tracking-uri", first.uri]) == 2
     assert "nope" in capsys.readouterr().err
+
+
+def test_a_report_that_fails_half_way_leaves_the_previous_one_whole(tmp_path, monkeypatch):
+    from linkevo.orchestrator.report import build as report_build
+
+    spec = GridSpec(grid_id="g0again", approaches=("EA", "MAP-LIS"), fitnesses=("Fp",), trials=2)
+    written = write_grid(tmp_path / "store", spec)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's own file")
+    first = build_report(written.uri, None, out, log_to_mlflow=False)
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert {p.name for p in first.files} < set(before) and "notes.txt" in before
+    real = report_build.write_bytes_atomic
+    calls = []
+
+    def full_disk(path, data):
+        calls.append(path)
+        if len(calls) == 3:
+            raise OSError(28, "No space left on device", str(path))
+        real(path, data)
+
+    monkeypatch.setattr(report_build, "write_bytes_atomic", full_disk)
+    with pytest.raises(OSError, match="No space left on device"):
+        build_report(written.uri, None, out, log_to_mlflow=False)
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert not list(tmp_path.glob(".out.new-*"))  # no staging folder left behind
