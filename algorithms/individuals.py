@@ -6,6 +6,8 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from linkevo.sim.genome import N_GENES
+
 
 @dataclass(frozen=True)
 class Individuals:
@@ -54,7 +56,32 @@ class Individuals:
 
     @staticmethod
     def from_state(state: dict[str, np.ndarray], prefix: str) -> Individuals:
-        """Returns the Individuals stored by `to_state(prefix)`."""
-        return Individuals(
-            **{f.name: np.asarray(state[f"{prefix}.{f.name}"]) for f in fields(Individuals)}
-        )
+        """Returns the Individuals stored by `to_state(prefix)`.
+
+        Raises:
+            KeyError: a field is missing.
+            ValueError: naming the field, when its dtype, shape or values are not those
+                `to_state` writes (real numbers, one row per genome, genes in [0, 1),
+                finite losses, error counts >= 0).
+        """
+        arrays = {f.name: np.asarray(state[f"{prefix}.{f.name}"]) for f in fields(Individuals)}
+        n = arrays["genome"].shape[0] if arrays["genome"].ndim == 2 else -1
+
+        def bad(name: str, what: str) -> ValueError:
+            array = arrays[name]
+            return ValueError(f"{prefix}.{name} ({array.dtype}, shape {array.shape}): {what}")
+
+        for name, array in arrays.items():
+            kind = "i" if name == "error" else "f"
+            if array.dtype.kind != kind:
+                raise bad(name, f"allowed: {'integers' if kind == 'i' else 'real numbers'}")
+            if array.ndim == 0 or array.shape[0] != n:
+                raise bad(name, f"allowed: one row per genome ({n})")
+        genome = arrays["genome"]
+        if genome.shape[1] != N_GENES or not ((genome >= 0) & (genome < 1)).all():
+            raise bad("genome", f"allowed: ({n}, {N_GENES}) genes in [0, 1)")
+        if not np.isfinite(arrays["loss"]).all():
+            raise bad("loss", "allowed: finite losses")
+        if (arrays["error"] < 0).any():
+            raise bad("error", "allowed: failed-angle counts >= 0")
+        return Individuals(**arrays)

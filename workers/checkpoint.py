@@ -64,8 +64,9 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
     """Returns the checkpoint in `folder`, or None when there is none.
 
     Raises:
-        CheckpointError: naming the file when it is truncated, not an npz or lacks the
-            bookkeeping entries.
+        CheckpointError: naming the file when it is truncated, not an npz, or lacks or
+            holds impossible bookkeeping entries (the search state itself is checked as
+            the optimizer loads it, `workers.trial`).
     """
     path = folder / CHECKPOINT_FILE
     if not path.is_file():
@@ -76,6 +77,8 @@ def load_checkpoint(folder: Path) -> Checkpoint | None:
         spec = json.loads(str(arrays.pop("checkpoint.spec")[()]))
     except (zipfile.BadZipFile, OSError, EOFError, KeyError, ValueError) as exc:
         raise CheckpointError(path, f"the file is damaged ({type(exc).__name__}: {exc})") from exc
+    if rows < 0 or not isinstance(spec, dict):
+        raise CheckpointError(path, f"its bookkeeping is impossible (rows {rows}, spec {spec!r})")
     return Checkpoint(state=arrays, rows=rows, spec=spec)
 
 

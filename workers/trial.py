@@ -5,7 +5,6 @@ from __future__ import annotations
 import importlib.metadata
 import json
 import platform
-import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -23,7 +22,13 @@ from linkevo.sim.study import (
     REPERTOIRE_APPROACHES,
     SINGLE_FITNESSES,
 )
-from linkevo.workers.checkpoint import Checkpoint, load_checkpoint, save_checkpoint
+from linkevo.workers.checkpoint import (
+    CHECKPOINT_FILE,
+    Checkpoint,
+    CheckpointError,
+    load_checkpoint,
+    save_checkpoint,
+)
 from linkevo.workers.evaluators import Evaluator, resolve_target
 from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.plots.repertoire import draw_trial_maps
@@ -210,13 +215,19 @@ def _resume(
     for key in ("evaluations", "max_seconds", "checkpoint_every"):
         saved.pop(key, None)
         mine.pop(key, None)
+    path = folder / CHECKPOINT_FILE
     if saved != mine:
         diff = sorted(k for k in set(saved) | set(mine) if saved.get(k) != mine.get(k))
-        raise ValueError(
-            f"the checkpoint in {folder} belongs to another trial; differing: "
-            + ", ".join(f"{k} (saved {saved.get(k)!r}, now {mine.get(k)!r})" for k in diff)
+        raise CheckpointError(
+            path,
+            "it belongs to another trial; differing: "
+            + ", ".join(f"{k} (saved {saved.get(k)!r}, now {mine.get(k)!r})" for k in diff),
         )
-    optimizer.load_state_dict(checkpoint.state)
+    try:
+        optimizer.load_state_dict(checkpoint.state)
+    except (KeyError, ValueError, TypeError, IndexError, AttributeError, RuntimeError) as exc:
+        problem = f"missing entry {exc}" if isinstance(exc, KeyError) else str(exc)
+        raise CheckpointError(path, f"its search state does not load: {problem}") from exc
     for row in log.truncate(checkpoint.rows):
         recorder.log_iteration(int(row["iteration"]), row)
     return True
@@ -295,7 +306,7 @@ def run_trial(
     folder = out_dir / CHECKPOINT_DIR
     if not (resume and _resume(spec, optimizer, log, recorder, folder)):
         log.reset()
-        shutil.rmtree(folder, ignore_errors=True)
+        (folder / CHECKPOINT_FILE).unlink(missing_ok=True)  # nothing else it did not write
     write_json_atomic(
         out_dir / SETTINGS_FILE,
         {

@@ -14,6 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from linkevo.sim.linkage_doc import from_document
+from linkevo.workers.checkpoint import CheckpointError
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.store.artifacts import read_npz
@@ -203,7 +204,9 @@ def test_resume_refuses_a_checkpoint_of_another_trial(tmp_path: Path) -> None:
     spec = spec_for("EA", evaluations=2 * BATCH)
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
     other = spec_for("EA", evaluations=2 * BATCH, seed=99)
-    with pytest.raises(ValueError, match=r"another trial; differing: seed \(saved 7, now 99\)"):
+    with pytest.raises(
+        CheckpointError, match=r"another trial; differing: seed \(saved 7, now 99\)"
+    ):
         run_trial(other, evaluator_for(other), NullRecorder(), tmp_path, resume=True)
 
 
@@ -265,3 +268,64 @@ def test_user_target_file(tmp_path: Path) -> None:
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "out")
     settings = json.loads((tmp_path / "out" / "settings.json").read_text())
     assert settings["target"]["step"] == [[-4.0, -1.0], [0.0, -1.0], [4.0, -1.0]]
+
+
+def _damage(state: dict[str, np.ndarray], how: str) -> None:
+    """Damages a MAP-LIS checkpoint's arrays in place, as a bad disk or a bad edit would."""
+    if how == "wrong shape":
+        state["archive.genome"] = state["archive.genome"][:, :55]
+    elif how == "shifted cells":
+        state["archive.cells"] = state["archive.cells"] + 1
+    elif how == "NaN losses":
+        state["archive.loss"] = np.full_like(state["archive.loss"], np.nan)
+    elif how == "bad RNG state":
+        state["optimizer.rng"] = np.array('{"bit_generator": "PCG64", "state": 3}')
+    elif how == "missing key":
+        del state["archive.loss"]
+    elif how == "genomes as strings":
+        state["archive.genome"] = state["archive.genome"].astype(str).astype("<U3")
+    elif how == "negative row count":
+        state["checkpoint.rows"] = np.array(-4, dtype=np.int64)
+
+
+@pytest.mark.parametrize(
+    ("how", "names"),
+    [
+        ("wrong shape", "archive.genome (float64, shape"),
+        ("shifted cells", "do not bin to their saved cells"),
+        ("NaN losses", "archive.loss"),
+        ("bad RNG state", "does not load"),
+        ("missing key", "missing entry 'archive.loss'"),
+        ("genomes as strings", "archive.genome (<U3"),
+        ("negative row count", "impossible (rows -4"),
+    ],
+)
+def test_a_damaged_checkpoint_is_refused_naming_the_file_and_the_remedy(
+    tmp_path: Path, how: str, names: str
+) -> None:
+    from linkevo.workers.store.artifacts import write_npz_atomic
+
+    spec = spec_for("MAP-LIS", evaluations=3 * BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
+    path = tmp_path / "checkpoint" / "state.npz"
+    state = read_npz(path)
+    _damage(state, how)
+    write_npz_atomic(path, state)
+    damaged = path.read_bytes()
+    with pytest.raises(CheckpointError) as caught:
+        run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path, resume=True)
+    message = str(caught.value)
+    assert f"cannot resume from {path}" in message and names in message, message
+    assert "--restart-trial KEY" in message
+    assert path.read_bytes() == damaged  # left for the user to look at
+
+
+def test_resume_without_a_checkpoint_deletes_nothing_it_did_not_write(tmp_path: Path) -> None:
+    spec = spec_for("EA", evaluations=2 * BATCH)
+    (tmp_path / "checkpoint").mkdir()
+    own = tmp_path / "checkpoint" / "state.npz.before-upgrade"
+    own.write_bytes(b"the user's copy")
+    (tmp_path / "notes.txt").write_text("kept")
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path, resume=True)
+    assert own.read_bytes() == b"the user's copy" and (tmp_path / "notes.txt").is_file()
+    assert (tmp_path / "checkpoint" / "state.npz").is_file()
