@@ -22,6 +22,7 @@ from linkevo.sim.study import (
     STUDY_EVALUATIONS,
     TARGETS,
 )
+from linkevo.workers.store.outage import OUTAGE_LIMIT_S
 
 STUDY_TRIALS = 10
 """Trials per approach and fitness in the study."""
@@ -43,6 +44,7 @@ EXECUTION_KEYS: frozenset[str] = frozenset(
         "checkpoint_every",
         "max_concurrent_trials",
         "max_retries",
+        "server_outage_s",
         "experiment",
         "tracking_uri",
         "work_dir",
@@ -83,6 +85,8 @@ class GridConfig:
         checkpoint_every: iterations between checkpoints, >= 1.
         max_concurrent_trials: trials in flight at once; 0 = as many as the cluster fits.
         max_retries: retries of a trial after a node, worker or actor loss, >= 0.
+        server_outage_s: seconds a tracking server may stay silent before the grid stops
+            (`workers.store.outage`), > 0.
         experiment: MLflow experiment name.
         tracking_uri: MLflow tracking URI; "" = the embedded store (or MLFLOW_TRACKING_URI).
         work_dir: folder for trial checkpoints; "" = next to the embedded store.
@@ -105,6 +109,7 @@ class GridConfig:
     checkpoint_every: int = 10
     max_concurrent_trials: int = 0
     max_retries: int = 3
+    server_outage_s: float = OUTAGE_LIMIT_S
     experiment: str = "linkevo"
     tracking_uri: str = ""
     work_dir: str = ""
@@ -128,7 +133,7 @@ class GridConfig:
 
 
 KEYS: tuple[str, ...] = tuple(f.name for f in fields(GridConfig))
-FLOAT_KEYS: tuple[str, ...] = ("max_seconds", "cpus_per_evaluator", "trial_cpus")
+FLOAT_KEYS: tuple[str, ...] = ("max_seconds", "cpus_per_evaluator", "trial_cpus", "server_outage_s")
 """Keys read as floats when the TOML gives an integer (`trial_cpus = 0`)."""
 
 
@@ -199,6 +204,7 @@ def _validate(cfg: GridConfig) -> None:
     for key in ("seed", "max_concurrent_trials", "max_retries", "evaluators_per_trial"):
         _check_int(cfg, key, 0)
     _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)
+    _check_number(cfg, "server_outage_s", 0.0, strict=True)
     if cfg.trial_cpus != "auto":
         try:
             _check_number(cfg, "trial_cpus", 0.0, strict=cfg.evaluators_per_trial == 0)

@@ -34,6 +34,13 @@ from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, war
 from linkevo.orchestrator.reservation import Cluster, Reservation
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_json_atomic
+from linkevo.workers.store.outage import (
+    ServerLost,
+    ServerWatch,
+    answers,
+    patiently,
+    use_quick_http,
+)
 from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
@@ -199,7 +206,7 @@ def launch(
     else:
         started_ray = connect_ray(address, Cluster.this_machine())
         cluster = Cluster.of_ray()
-    lease = None
+    lease = watch = None
     try:
         Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
@@ -236,12 +243,15 @@ def launch(
         if todo:
             warm_kernels()
         parent_run_id = parent_run(client, experiment_id, grid)
+        use_quick_http()  # no call waits minutes on a silent server; `watch` tells the user
+        watch = ServerWatch(uri, cfg.server_outage_s)
         record = {"grid_id": grid.grid_id, "tracking_uri": uri, "parent_run_id": parent_run_id}
         grid_record(root, grid).parent.mkdir(parents=True, exist_ok=True)
         write_json_atomic(grid_record(root, grid), record)
         ctx = TrialContext(
-            uri, experiment_id, parent_run_id, root, client, specs, reservation, started_ray
-        )
+            uri, experiment_id, parent_run_id, root, client, specs, reservation, started_ray,
+            watch,
+        )  # fmt: skip
         view = Progress(ctx, grid, len(grid.cells) - len(todo), progress, stream)
         try:
             with signals_stop_the_grid() as received:
@@ -249,21 +259,30 @@ def launch(
         except BaseException as exc:
             if isinstance(exc, GridInterrupted):
                 exc.finished += len(finished)
-            for run in layout.trial_runs(client, experiment_id, grid.grid_id, status="RUNNING"):
-                end_run(client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
-            end_run(client, parent_run_id, "KILLED", layout.error_text(exc))
-            raise
+            if not isinstance(exc, ServerLost) and answers(uri):
+                running = layout.trial_runs(client, experiment_id, grid.grid_id, status="RUNNING")
+                for run in running:
+                    end_run(client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
+                end_run(client, parent_run_id, "KILLED", layout.error_text(exc))
+            elif not isinstance(exc, ServerLost | KeyboardInterrupt | GridInterrupted):
+                since = watch.down_since or time.time()
+                during = f"the driver ({layout.error_text(exc)})"
+                raise ServerLost(uri, since, watch.limit_s, during) from exc
+            raise  # a silent server cannot be written: --resume marks the runs
         finally:
             view.close()
+            watch.close()
         outcomes = tuple(
             outcome_of(finished[c.key]) if c.key in finished else ran[c.key] for c in grid.cells
         )
         status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
-        log_grid_summary(client, parent_run_id, grid, outcomes)
-        client.set_terminated(parent_run_id, status)
+        patiently(
+            lambda: log_grid_summary(client, parent_run_id, grid, outcomes), uri, watch.limit_s
+        )
+        patiently(lambda: client.set_terminated(parent_run_id, status), uri, watch.limit_s)
     finally:
         if lease is not None:
-            lease.release()
+            lease.release(write=watch is None or watch.down_since is None)
         if started_ray:
             import ray
 

@@ -17,6 +17,7 @@ from linkevo.orchestrator.grid import Grid, TrialCell, trial_dir
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.reservation import Reservation
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.outage import ServerLost, ServerWatch, patiently
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialJob, TrialOutcome, end_run
 
@@ -60,6 +61,8 @@ class TrialContext:
     reservation: Reservation
     owns_ray: bool
     """True when this launch connected to (or started) Ray itself, and may disconnect."""
+    watch: ServerWatch
+    """Whether the tracking server answers (`workers.store.outage`)."""
 
     def job(self, grid: Grid, cell: TrialCell) -> TrialJob:
         """Returns the trial task's input for one cell."""
@@ -75,6 +78,7 @@ class TrialContext:
             evaluators=self.reservation.evaluators,
             cpus_per_evaluator=self.reservation.cpus_per_evaluator,
             threads=self.reservation.threads,
+            outage_s=self.watch.limit_s,
         )
 
 
@@ -144,7 +148,7 @@ def fan_out(
     outcomes: dict[str, TrialOutcome] = {}
     try:
         _run_tasks(grid, ctx, progress, task, pending, in_flight, outcomes)
-    except KeyboardInterrupt as exc:  # SIGINT or SIGTERM (signals_stop_the_grid)
+    except (KeyboardInterrupt, ServerLost) as exc:  # SIGINT, SIGTERM, a silent server
         if ctx.owns_ray:
             ray.shutdown()
         else:
@@ -154,6 +158,8 @@ def fan_out(
                 ray.cancel(ref, force=True)
                 if group is not None:
                     remove_placement_group(group)
+        if isinstance(exc, ServerLost):
+            raise
         name = received[-1] if received else "SIGINT"
         done = sum(o.status == "FINISHED" for o in outcomes.values())
         raise GridInterrupted(name, done, len(in_flight), len(pending)) from exc
@@ -201,6 +207,10 @@ def _run_tasks(
             ).remote(ctx.job(grid, cell))
             in_flight[ref] = (cell, group)
         done, rest = ray.wait(list(in_flight), num_returns=1, timeout=1.0)
+        news = ctx.watch.news()
+        if news:
+            progress.say(news)
+        ctx.watch.check()  # a server silent past its limit stops the grid here
         if done and rest:  # every trial that has ended, not one per pass
             done += ray.wait(rest, num_returns=len(rest), timeout=0)[0]
         finished = failed = 0
@@ -211,12 +221,18 @@ def _run_tasks(
             try:
                 outcome = ray.get(ref)
             except ray.exceptions.RayError as exc:
+                if isinstance(exc, ServerLost):  # the trial waited for the server in vain
+                    raise ServerLost(exc.uri, exc.since, ctx.watch.limit_s) from None
                 if isinstance(exc, RETRYABLE_ERRORS) and retries[cell.key] < cfg.max_retries:
                     retries[cell.key] += 1
                     progress.say(f"{cell.key}: {type(exc).__name__}; retry {retries[cell.key]}")
                     pending.appendleft(cell)
                     continue
-                outcome = lost_trial(ctx, grid.grid_id, cell, exc)
+                outcome = patiently(
+                    lambda c=cell, e=exc: lost_trial(ctx, grid.grid_id, c, e),
+                    ctx.uri,
+                    ctx.watch.limit_s,
+                )
             outcomes[cell.key] = outcome
             progress.ended(outcome)
             if outcome.status == "FINISHED":

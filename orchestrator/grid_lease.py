@@ -95,11 +95,15 @@ class GridLease:
         lease._thread.start()
         return lease
 
-    def release(self) -> None:
-        """Stops renewing and hands the lease back (if it is still this driver's)."""
+    def release(self, write: bool = True) -> None:
+        """Stops renewing and hands the lease back (if it is still this driver's); with
+        `write` False (the store is unreachable) it only stops renewing, and the lease
+        expires by itself."""
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join()
+        if not write:
+            return
         client = MlflowClient(self._uri)
         with contextlib.suppress(Exception):  # a store that went away keeps a lease that expires
             current = self._read(client)

@@ -43,10 +43,16 @@ class Progress:
 
     def _poll_rate(self) -> None:
         # Only the runs in flight are read: reading the whole grid every poll costs time
-        # in proportion to the grid on the tracking server (docs/scale.md).
-        runs = layout.trial_runs(
-            self._ctx.client, self._ctx.experiment_id, self._grid_id, status="RUNNING"
-        )
+        # in proportion to the grid on the tracking server (docs/scale.md). A silent
+        # server is not asked (the rate stays as it was).
+        if self._ctx.watch.down_since is not None:
+            return
+        try:
+            runs = layout.trial_runs(
+                self._ctx.client, self._ctx.experiment_id, self._grid_id, status="RUNNING"
+            )
+        except Exception:  # the server went silent since the watch last asked
+            return
         evaluations = self._ended_evaluations + sum(
             r.data.metrics.get("evaluations", 0.0)
             for r in runs

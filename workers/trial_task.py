@@ -7,8 +7,10 @@ import contextlib
 import shutil
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numba
 import ray
@@ -19,6 +21,7 @@ from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.ray_evaluator import ActorPoolEvaluator
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
+from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, patiently, use_quick_http
 from linkevo.workers.trial import TrialSpec, run_trial
 
 """How much of a failure message the `error` tag keeps."""
@@ -60,6 +63,8 @@ class TrialJob:
         evaluators: evaluator actors (K); 0: the task evaluates itself.
         cpus_per_evaluator: CPUs each actor reserves.
         threads: numba threads the task evaluates with when K = 0.
+        outage_s: how long the trial waits for a silent tracking server
+            (`workers.store.outage`).
     """
 
     tracking_uri: str
@@ -73,6 +78,7 @@ class TrialJob:
     evaluators: int
     cpus_per_evaluator: float
     threads: int = 1
+    outage_s: float = OUTAGE_LIMIT_S
 
     def tags(self) -> dict[str, str]:
         """Returns the tags of the trial's MLflow run (host and Ray node: where it runs)."""
@@ -150,6 +156,9 @@ def _flush_quietly(recorder: MlflowRecorder) -> None:
         recorder.flush()
 
 
+T = TypeVar("T")
+
+
 def run_trial_job(job: TrialJob) -> TrialOutcome:
     """Runs one trial as a nested MLflow run; the body of the Ray trial task.
 
@@ -161,22 +170,30 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
     retries.
     A run that a resuming driver marked KILLED meanwhile is not marked FINISHED.
     """
+    use_quick_http()
     client = MlflowClient(job.tracking_uri)
-    earlier = layout.trial_runs(client, job.experiment_id, job.grid_id, trial_key=job.trial_key)
+
+    def wait(call: Callable[[], T]) -> T:  # a silent server is waited for, within a limit
+        return patiently(call, job.tracking_uri, job.outage_s)
+
+    earlier = wait(
+        lambda: layout.trial_runs(client, job.experiment_id, job.grid_id, trial_key=job.trial_key)
+    )
     for run in earlier:
         if run.info.status == "FINISHED":
             return outcome_of(run)
     for run in earlier:
         if run.info.status == "RUNNING":
-            end_run(client, run.info.run_id, "KILLED", "superseded by a retried attempt")
-    run_id = client.create_run(
-        job.experiment_id, run_name=job.trial_key, tags=job.tags()
+            wait(lambda r=run: end_run(client, r.info.run_id, "KILLED", "superseded by a retry"))
+    run_id = wait(
+        lambda: client.create_run(job.experiment_id, run_name=job.trial_key, tags=job.tags())
     ).info.run_id
     spec_values = asdict(job.spec)
-    client.log_batch(run_id, params=[Param(k, str(spec_values[k])) for k in SPEC_PARAMS])
+    params = [Param(k, str(spec_values[k])) for k in SPEC_PARAMS]
+    wait(lambda: client.log_batch(run_id, params=params))
     start = time.monotonic()
     pool: ActorPoolEvaluator | None = None
-    recorder = MlflowRecorder(client, run_id)
+    recorder = MlflowRecorder(client, run_id, outage_s=job.outage_s)
     try:
         out_dir = Path(job.out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -195,21 +212,25 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
                 placement_group=ray.util.get_current_placement_group(),
             )
         result = run_trial(spec, evaluator, recorder, out_dir, resume=True)
-        client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by)
+        wait(lambda: client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by))
+    except ServerLost:
+        raise  # nothing can be written; the driver stops the grid, --resume marks the run
     except RETRYABLE_ERRORS as exc:
         _flush_quietly(recorder)
-        end_run(client, run_id, "KILLED", layout.error_text(exc))
+        message = layout.error_text(exc)
+        wait(lambda: end_run(client, run_id, "KILLED", message))
         raise
     except Exception as exc:
         _flush_quietly(recorder)
-        end_run(client, run_id, "FAILED", layout.error_text(exc))
-        return outcome_of(client.get_run(run_id), time.monotonic() - start)
+        message = layout.error_text(exc)
+        wait(lambda: end_run(client, run_id, "FAILED", message))
+        return outcome_of(wait(lambda: client.get_run(run_id)), time.monotonic() - start)
     finally:
         if pool is not None:
             pool.close()
-    if client.get_run(run_id).info.status == "RUNNING":
-        client.set_terminated(run_id, "FINISHED")
+    if wait(lambda: client.get_run(run_id)).info.status == "RUNNING":
+        wait(lambda: client.set_terminated(run_id, "FINISHED"))
         # MLflow holds the finished trial's files now; the local copy (checkpoint
         # included) would only double the grid's disk use.
         shutil.rmtree(job.out_dir, ignore_errors=True)
-    return outcome_of(client.get_run(run_id), time.monotonic() - start)
+    return outcome_of(wait(lambda: client.get_run(run_id)), time.monotonic() - start)

@@ -98,6 +98,7 @@ def run_grid(args: argparse.Namespace) -> int:
     from linkevo.orchestrator import driver
     from linkevo.orchestrator.fan_out import GridInterrupted
     from linkevo.orchestrator.ray_connection import dry_run_cluster
+    from linkevo.workers.store.outage import ServerLost
     from linkevo.workers.store.tracking import resolve_tracking_uri
 
     if args.dry_run:
@@ -119,6 +120,15 @@ def run_grid(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 128 + int(getattr(signal, exc.signal_name))
+    except ServerLost as exc:
+        print(
+            f"linkevo grid: stopped: {exc}. The trials in flight were stopped; their runs "
+            "stay RUNNING until the resume marks them KILLED and continues them from their "
+            f"checkpoints.\nOnce the server answers, complete the grid with:  "
+            f"{_resume_command(args)}",
+            file=sys.stderr,
+        )
+        return 1
     print(summary(result, grid.config))
     print(
         f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."

@@ -13,13 +13,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 
-@contextlib.contextmanager
-def mlflow_server(folder: Path) -> Iterator[str]:
-    """Runs `mlflow server` on 127.0.0.1 with a sqlite store and proxied artefacts in
-    `folder`; yields its URI once /health answers, and stops it on exit."""
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+def start_server(folder: Path, port: int) -> subprocess.Popen:
+    """Starts `mlflow server` on 127.0.0.1:`port` with a sqlite store and proxied artefacts
+    in `folder` (the same folder and port serve the same store again after a restart);
+    returns once /health answers."""
     folder.mkdir(parents=True, exist_ok=True)
     command = [
         str(Path(sys.executable).parent / "mlflow"), "server", "--host", "127.0.0.1",
@@ -31,18 +28,32 @@ def mlflow_server(folder: Path) -> Iterator[str]:
     process = subprocess.Popen(
         command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env
     )
-    uri = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 120
+    while True:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/health", timeout=2):
+                return process
+        except OSError:
+            if time.monotonic() > deadline or process.poll() is not None:
+                process.kill()
+                raise RuntimeError("mlflow server did not start") from None
+            time.sleep(0.5)
+
+
+def free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+@contextlib.contextmanager
+def mlflow_server(folder: Path) -> Iterator[str]:
+    """Runs `mlflow server` on 127.0.0.1 with a sqlite store and proxied artefacts in
+    `folder`; yields its URI once /health answers, and stops it on exit."""
+    port = free_port()
+    process = start_server(folder, port)
     try:
-        deadline = time.monotonic() + 120
-        while True:
-            try:
-                with urllib.request.urlopen(f"{uri}/health", timeout=2):
-                    break
-            except OSError:
-                if time.monotonic() > deadline or process.poll() is not None:
-                    raise RuntimeError("mlflow server did not start") from None
-                time.sleep(0.5)
-        yield uri
+        yield f"http://127.0.0.1:{port}"
     finally:
         process.terminate()
         process.wait(timeout=30)

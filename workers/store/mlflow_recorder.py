@@ -9,6 +9,8 @@ from pathlib import Path
 from mlflow.entities import Metric
 from mlflow.tracking import MlflowClient
 
+from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, answers, patiently
+
 ARTIFACT_SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".json", ".png", ".gif", ".pt")
 """The trial files logged at the end; the checkpoint folder and (hidden) temporary files
 are never logged."""
@@ -37,12 +39,20 @@ class MlflowRecorder:
         send_every_s: seconds between sends (0 sends every iteration).
     """
 
-    def __init__(self, client: MlflowClient, run_id: str, send_every_s: float = SEND_EVERY_S):
+    def __init__(
+        self,
+        client: MlflowClient,
+        run_id: str,
+        send_every_s: float = SEND_EVERY_S,
+        outage_s: float = OUTAGE_LIMIT_S,
+    ):
         self._client = client
         self._run_id = run_id
         self._send_every_s = send_every_s
+        self._outage_s = outage_s
         self._gathered: list[Metric] = []
         self._sent_at = -float("inf")  # the first iteration goes out at once
+        self._silent_since: float | None = None
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
         """Gathers one iteration's metrics with `step = iteration`; sends when it is time.
@@ -61,20 +71,43 @@ class MlflowRecorder:
             self._send()
 
     def _send(self) -> None:
-        gathered, self._gathered = self._gathered, []
+        """Sends what is gathered. While the tracking server does not answer, the metrics
+        stay gathered (the trial goes on) and are sent when it answers again; past
+        `outage_s` of silence this raises `ServerLost`."""
         self._sent_at = time.monotonic()
-        for start in range(0, len(gathered), MAX_BATCH):
-            self._client.log_batch(self._run_id, metrics=gathered[start : start + MAX_BATCH])
+        uri = self._client.tracking_uri
+        while self._gathered:
+            part = self._gathered[:MAX_BATCH]
+            try:
+                self._client.log_batch(self._run_id, metrics=part)
+            except Exception:
+                if answers(uri):
+                    raise
+                self._silent_since = self._silent_since or time.time()
+                if time.time() - self._silent_since > self._outage_s:
+                    raise ServerLost(uri, self._silent_since, self._outage_s) from None
+                return
+            self._silent_since = None
+            del self._gathered[: len(part)]
 
     def flush(self) -> None:
-        """Sends the gathered metrics."""
+        """Sends the gathered metrics, waiting (up to `outage_s`) for a silent server."""
+        patiently(self._flush_now, self._client.tracking_uri, self._outage_s)
+
+    def _flush_now(self) -> None:
         self._send()
+        if self._gathered:
+            raise ConnectionError("the tracking server does not answer")
 
     def log_artifacts(self, out_dir: Path) -> None:
         """Flushes the metrics, then logs the trial's result files in `out_dir` at the run's
-        artefact root."""
+        artefact root (waiting, up to `outage_s`, for a silent server)."""
         self.flush()
         for path in sorted(Path(out_dir).iterdir()):
             hidden = path.name.startswith(".")  # temporary files of a writer, never results
             if path.is_file() and path.suffix in ARTIFACT_SUFFIXES and not hidden:
-                self._client.log_artifact(self._run_id, str(path))
+                patiently(
+                    lambda p=path: self._client.log_artifact(self._run_id, str(p)),
+                    self._client.tracking_uri,
+                    self._outage_s,
+                )
