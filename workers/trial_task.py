@@ -24,7 +24,6 @@ from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, patiently, use_quick_http
 from linkevo.workers.trial import TrialSpec, run_trial
 
-"""How much of a failure message the `error` tag keeps."""
 RETRYABLE_ERRORS: tuple[type[BaseException], ...] = (
     ray.exceptions.RayActorError,
     ray.exceptions.ActorUnavailableError,

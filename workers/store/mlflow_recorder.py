@@ -37,6 +37,8 @@ class MlflowRecorder:
         client: a client on the run's tracking URI.
         run_id: the run to log to.
         send_every_s: seconds between sends (0 sends every iteration).
+        outage_s: how long a silent tracking server is waited for (`workers.store.outage`):
+            meanwhile the metrics stay gathered and the trial goes on.
     """
 
     def __init__(
