@@ -4,6 +4,7 @@ metrics.csv log every trial writes."""
 from __future__ import annotations
 
 import csv
+import errno
 import io
 import os
 import sys
@@ -13,7 +14,7 @@ from typing import Protocol
 from tqdm import tqdm
 
 from linkevo.workers.checkpoint import checkpointed_rows
-from linkevo.workers.store.artifacts import write_text_atomic
+from linkevo.workers.store.artifacts import disk_full, write_text_atomic
 
 
 class Recorder(Protocol):
@@ -87,13 +88,18 @@ class MetricsCsv:
     def append(self, metrics: dict[str, float]) -> None:
         """Appends one row (writing the header first if the file is new)."""
         new = not self.path.exists() or self.path.stat().st_size == 0
-        with open(self.path, "a", newline="") as f:
-            writer = csv.writer(f)
-            if new:
-                writer.writerow(list(metrics))
-            writer.writerow([repr(float(v)) for v in metrics.values()])
-            f.flush()
-            os.fsync(f.fileno())
+        try:
+            with open(self.path, "a", newline="") as f:
+                writer = csv.writer(f)
+                if new:
+                    writer.writerow(list(metrics))
+                writer.writerow([repr(float(v)) for v in metrics.values()])
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                raise disk_full(self.path, None, self.path.stat().st_size) from exc
+            raise
 
     def read(self) -> list[dict[str, float]]:
         """Returns every row as floats (empty when there is no file)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import stat
@@ -90,3 +91,24 @@ def test_parquet_is_zstd_and_keeps_float32_only_where_asked(tmp_path: Path):
     assert table.schema.field("foot_x").type.value_type == pa.float32()
     assert table.schema.field("genome").type.value_type == pa.float64()
     np.testing.assert_array_equal(np.stack(table.column("genome").to_numpy(False)), genomes)
+
+
+def test_a_full_disk_names_the_file_and_the_space_it_needs(tmp_path, monkeypatch):
+    """A full disk cannot be made here without root: the file system's answer is stood in
+    for by the OS error a full disk raises when the data is written."""
+    target = tmp_path / "best_linkage.json"
+    target.write_bytes(b"the previous version")
+
+    def full(self, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_bytes", full)
+    with pytest.raises(OSError) as caught:
+        write_bytes_atomic(target, b"x" * 5000)
+    monkeypatch.undo()
+    message = str(caught.value)
+    assert caught.value.errno == errno.ENOSPC
+    assert f"no space left writing {target} (it needs 5,000 bytes;" in message
+    assert "bytes are free on that filesystem" in message
+    assert target.read_bytes() == b"the previous version"
+    assert [p.name for p in tmp_path.iterdir()] == ["best_linkage.json"]  # no temp left

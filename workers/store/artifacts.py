@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import secrets
+import shutil
 import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -59,7 +61,7 @@ def _fsync(path: Path, directory: bool = False) -> None:
 
 
 @contextmanager
-def atomic_path(path: Path) -> Iterator[Path]:
+def atomic_path(path: Path, need: int | None = None) -> Iterator[Path]:
     """Yields a temporary path beside `path`; on success it replaces `path` atomically.
 
     The one way linkevo writes a file: the temporary file lives in the same folder (so
@@ -68,27 +70,49 @@ def atomic_path(path: Path) -> Iterator[Path]:
     any file the user makes. Before the rename the file is fsynced, and the folder after
     it. Stale temporary files of dead writers of the same path are swept first. On error
     the temporary file is removed and `path` is left as it was; a block that deletes the
-    temporary file itself leaves `path` as it was too.
+    temporary file itself leaves `path` as it was too. A full disk (or quota) is an
+    OSError naming the file, the bytes it needs (`need`, when the caller knows them) or had
+    written, and the space free there.
     """
     path = Path(path)
     sweep_stale_temps(path)
     tmp = _temp_name(path)
-    os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+    written = 0
     try:
-        yield tmp
-        if not tmp.exists():
-            return
-        _fsync(tmp)
-        os.replace(tmp, path)
-        _fsync(path.parent, directory=True)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
+        os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+        try:
+            yield tmp
+            if not tmp.exists():
+                return
+            _fsync(tmp)
+            os.replace(tmp, path)
+            _fsync(path.parent, directory=True)
+        except BaseException:
+            written = tmp.stat().st_size if tmp.exists() else 0
+            tmp.unlink(missing_ok=True)
+            raise
+    except OSError as exc:
+        if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            raise disk_full(path, need, written) from exc
         raise
+
+
+def disk_full(path: Path, need: int | None, written: int) -> OSError:
+    """Returns the error of a write to `path` that found its disk (or quota) full: the
+    file, the bytes it needs (or had written) and the space free there."""
+    free = shutil.disk_usage(path.parent).free
+    size = f"it needs {need:,} bytes" if need is not None else f"it had {written:,} bytes"
+    return OSError(
+        errno.ENOSPC,
+        f"no space left writing {path} ({size}; {free:,} bytes are free on that "
+        "filesystem); free space there, or point work_dir (or --out) at a larger disk",
+        str(path),
+    )
 
 
 def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Writes `data` to `path` atomically (see `atomic_path`)."""
-    with atomic_path(path) as tmp:
+    with atomic_path(path, need=len(data)) as tmp:
         tmp.write_bytes(data)
 
 
