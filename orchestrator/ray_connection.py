@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import threading
+import uuid
 
 from linkevo.orchestrator.reservation import Cluster
 
@@ -37,13 +38,17 @@ def _loopback_only(local: bool) -> None:
     ray_constants.ENABLE_RAY_CLUSTER = not local
 
 
+_reaper_token = uuid.uuid4().hex
+"""What marks this process's local Ray processes for its reaper (`reaper.SESSION_ENV`)."""
+
+
 def _start_reaper() -> None:
     """Starts, once per process, `orchestrator.reaper`: it stops what is left of this
     process's local Ray instance when this process ends, however it ends."""
     global _reaper
     if _reaper is None:
         _reaper = subprocess.Popen(
-            [sys.executable, "-m", "linkevo.orchestrator.reaper"],
+            [sys.executable, "-m", "linkevo.orchestrator.reaper", _reaper_token],
             stdin=subprocess.PIPE, start_new_session=True,
         )  # fmt: skip
 
@@ -97,14 +102,22 @@ def connect_ray(address: str | None, cluster: Cluster) -> bool:
     if not local:
         ray.init(address=address)
     else:
+        from linkevo.orchestrator.reaper import SESSION_ENV
+
         _start_reaper()
-        ray.init(
-            address="local",
-            num_cpus=int(cluster.total_cpus),
-            include_dashboard=False,
-            object_store_memory=LOCAL_OBJECT_STORE_BYTES,
-            logging_level=logging.WARNING,  # not "Started a local Ray instance."
-        )
+        # Ray's processes (and the workers its raylet starts later) inherit the reaper's
+        # token from this environment; this process's later children do not.
+        os.environ[SESSION_ENV] = _reaper_token
+        try:
+            ray.init(
+                address="local",
+                num_cpus=int(cluster.total_cpus),
+                include_dashboard=False,
+                object_store_memory=LOCAL_OBJECT_STORE_BYTES,
+                logging_level=logging.WARNING,  # not "Started a local Ray instance."
+            )
+        finally:
+            os.environ.pop(SESSION_ENV, None)
     if in_main:
         # ray.init installs SIGTERM handlers (a native one that dumps a stack, a Python
         # one that exits); give the signal back to the handler this process had
