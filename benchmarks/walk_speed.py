@@ -5,14 +5,17 @@ Run: `.venv/bin/python benchmarks/walk_speed.py` (options: --linkage FILE.json, 
 default `benchmarks/walk_linkage.json`, the first robot of MAP-LIS in the paper-mode study
 grid (`linkevo hexapod study`). The process is pinned to one core.
 
-Two figures per floor, each the best of `--repeats` runs, simulated seconds per wall
-second:
+Per floor and robot model (`sim.walk.MODELS`: `lean`, the default, and `full`), each the
+best of `--repeats` runs, simulated seconds per wall second:
 - **walk**: `sim.walk.walk` as `linkevo hexapod simulate` runs it: model built, settled,
-  then the gait's controller, the motors' velocity loop and the records a builder reads;
-- **ceiling**: a bare `mujoco.mj_step` loop over the same model for the same number of
-  steps with constant motor voltages, nothing recorded (what MuJoCo itself allows).
-Their ratio is the share of the ceiling the walk reaches. Goal: walk >= 20x real time (a
-10-s trial in <= 0.5 s).
+  then the gait's controller, the motors and the records a builder reads (pin statics
+  included);
+- **ceiling**: the same model stepped for the same time in control ticks with constant
+  motor goals, nothing recorded (what MuJoCo itself allows; the lean model's couplings are
+  re-centred each tick, without which it cannot turn).
+The distance each model walks is printed beside, and the lean walk's speed over the full
+walk's is the ratio against today's code. Goal: walk >= 20x real time (a 10-s trial in
+<= 0.5 s).
 """
 
 from __future__ import annotations
@@ -30,8 +33,7 @@ import numpy as np
 from linkevo.sim.leg import leg_from_genome
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.robot import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG
-from linkevo.sim.walk import WalkSettings, walk
-from linkevo.sim.walk_model import build_robot
+from linkevo.sim.walk import MODELS, WalkSettings, walk
 
 DEFAULT_LINKAGE = Path(__file__).with_name("walk_linkage.json")
 
@@ -46,8 +48,6 @@ def main() -> None:
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     genome, mode = from_document(json.loads(args.linkage.read_text(encoding="utf-8")))
     leg = leg_from_genome(genome, mode)
-    settings = WalkSettings(seconds=args.seconds)
-    simulated = settings.seconds + settings.settle_s
     print(
         f"{platform.processor() or platform.machine()}, mujoco {mujoco.__version__}, one core; "
         f"leg {args.linkage.name}: {leg.n_parts} moving parts, {len(leg.beams)} beams"
@@ -55,29 +55,46 @@ def main() -> None:
     figures = {}
     for name in args.floor:
         floor = FLOORS[name]
-        walk_s = min(
-            _timed(lambda f=floor: walk(leg, f, settings=settings)) for _ in range(args.repeats)
-        )
-        robot = build_robot(
-            dict.fromkeys(LEG_SLOTS, leg),
-            {s: np.radians(TRIPOD_OFFSETS_DEG[s]) for s in LEG_SLOTS},
-            floor,
-        )
-        steps = round(simulated / robot.model.opt.timestep)
-        ceiling_s = min(_timed(lambda r=robot, n=steps: _bare(r, n)) for _ in range(args.repeats))
-        figures[name] = {
-            "walk_x_real_time": round(simulated / walk_s, 1),
-            "ceiling_x_real_time": round(simulated / ceiling_s, 1),
-            "walk_s_per_10s_trial": round(walk_s * 10.0 / args.seconds, 3),
-            "share_of_ceiling": round(ceiling_s / walk_s, 3),
-            "bodies": int(robot.model.nbody),
-            "loop_closures": int(robot.model.neq),
-        }
-        print(
-            f"{name:>6}: walk {simulated / walk_s:5.1f}x real time ({walk_s:.3f} s for "
-            f"{simulated:g} simulated s); ceiling {simulated / ceiling_s:5.1f}x; the walk "
-            f"reaches {ceiling_s / walk_s:.0%} of the ceiling"
-        )
+        for model in MODELS:
+            settings = WalkSettings(seconds=args.seconds, model=model)
+            simulated = settings.seconds + settings.settle_s
+            walks = []
+            walk_s = min(
+                _timed(lambda f=floor, s=settings, w=walks: w.append(walk(leg, f, settings=s)))
+                for _ in range(args.repeats)
+            )
+            build = MODELS[model][0]
+            robot = build(
+                dict.fromkeys(LEG_SLOTS, leg),
+                {s: np.radians(TRIPOD_OFFSETS_DEG[s]) for s in LEG_SLOTS},
+                floor,
+                timestep=settings.step,
+            )
+            ticks = round(simulated * 50)
+            ceiling_s = min(
+                _timed(lambda r=robot, n=ticks: _bare(r, n)) for _ in range(args.repeats)
+            )
+            figures[f"{name}/{model}"] = {
+                "walk_x_real_time": round(simulated / walk_s, 1),
+                "ceiling_x_real_time": round(simulated / ceiling_s, 1),
+                "walk_s_per_10s_trial": round(walk_s * 10.0 / args.seconds, 3),
+                "share_of_ceiling": round(ceiling_s / walk_s, 3),
+                "distance_cm": round(walks[-1].distance_m * 100, 1),
+                "bodies": int(robot.model.nbody),
+                "dofs": int(robot.model.nv),
+                "equalities": int(robot.model.neq),
+                "timestep_ms": settings.step * 1000,
+            }
+            print(
+                f"{name:>6} {model:>4}: walk {simulated / walk_s:5.1f}x real time "
+                f"({walk_s:.3f} s for {simulated:g} simulated s); ceiling "
+                f"{simulated / ceiling_s:5.1f}x; {ceiling_s / walk_s:.0%} of the ceiling; "
+                f"walked {walks[-1].distance_m * 100:.1f} cm; {robot.model.nv} dofs, "
+                f"{robot.model.neq} equalities, {settings.step * 1000:g} ms step"
+            )
+        lean, full = figures[f"{name}/lean"], figures[f"{name}/full"]
+        ratio = lean["walk_x_real_time"] / full["walk_x_real_time"]
+        print(f"{name:>6}: lean walk / full walk {ratio:.1f}x")
     print(json.dumps(figures))
 
 
@@ -87,10 +104,15 @@ def _timed(run) -> float:
     return time.perf_counter() - start
 
 
-def _bare(robot, steps: int) -> None:
-    data = mujoco.MjData(robot.model)
-    data.ctrl[:] = 4.0
-    mujoco.mj_step(robot.model, data, nstep=steps)
+def _bare(robot, ticks: int) -> None:
+    """Steps the robot in 20-ms control ticks with constant motor goals."""
+    model, data = robot.model, mujoco.MjData(robot.model)
+    data.ctrl[:] = 2.6
+    steps = round(0.02 / model.opt.timestep)
+    for _ in range(ticks):
+        if robot.coupling is not None:
+            robot.coupling.update(model, data)
+        mujoco.mj_step(model, data, nstep=steps)
 
 
 if __name__ == "__main__":

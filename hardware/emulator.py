@@ -61,6 +61,9 @@ class BusEmulator:
         velocity_limit: Velocity Limit (address 44) each motor starts with.
         model_number: what the motors answer to a ping (30 = MX-28(2.0)).
         clock: seconds, monotonic; motion is integrated against it.
+        motor_factory: makes each motor (`motor_factory(id, now=..., velocity_limit=...,
+            model_number=...)`); default `EmulatedMotor`, whose shaft turns as commanded
+            (`hardware.physics_bus.PhysicsWorld.motor_factory`: the simulated robot's cranks).
     """
 
     def __init__(
@@ -70,11 +73,12 @@ class BusEmulator:
         velocity_limit: int = 230,
         model_number: int = ct.MX28_MODEL_NUMBER,
         clock: Callable[[], float] = time.monotonic,
+        motor_factory: Callable[..., EmulatedMotor] = EmulatedMotor,
     ) -> None:
         self._clock = clock
         now = clock()
         self._motors = {
-            i: EmulatedMotor(i, now=now, velocity_limit=velocity_limit, model_number=model_number)
+            i: motor_factory(i, now=now, velocity_limit=velocity_limit, model_number=model_number)
             for i in sorted(motor_ids)
         }
         self._lock = threading.Lock()

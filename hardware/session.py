@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.emulator import BusEmulator
@@ -13,6 +14,9 @@ from linkevo.hardware.hexapod import Hexapod, WalkResult
 from linkevo.hardware.safety import SignalGuard
 from linkevo.hardware.telemetry import TelemetryWriter, TickRecord
 
+if TYPE_CHECKING:
+    from linkevo.hardware.physics_bus import PhysicsWorld
+
 
 def run_walk(
     config: RobotConfig,
@@ -20,6 +24,7 @@ def run_walk(
     *,
     telemetry: str | Path | None = None,
     simulate: bool = False,
+    physics: PhysicsWorld | None = None,
     on_tick: Callable[[TickRecord], None] | None = None,
 ) -> WalkResult:
     """Walks the robot once and always leaves it stopped with torque off.
@@ -29,6 +34,8 @@ def run_walk(
         seconds: walking time (after start-up and alignment).
         telemetry: CSV path for one row per tick; written atomically, kept on a stop.
         simulate: run against an in-process bus emulator on a pty instead of the port.
+        physics: with `simulate`, the emulator's motors are this simulated robot's cranks
+            (`hardware.physics_bus`); None: they turn as commanded.
         on_tick: called with every tick's record (after the telemetry row).
 
     Raises:
@@ -38,7 +45,7 @@ def run_walk(
     """
     robots: list[Hexapod] = []
     try:
-        result = _walk_once(config, seconds, telemetry, simulate, on_tick, robots)
+        result = _walk_once(config, seconds, telemetry, simulate, physics, on_tick, robots)
     except BaseException as exc:
         _check_shutdown(robots, exc)
         raise
@@ -60,12 +67,14 @@ def _walk_once(
     seconds: float,
     telemetry: str | Path | None,
     simulate: bool,
+    physics: PhysicsWorld | None,
     on_tick: Callable[[TickRecord], None] | None,
     robots: list[Hexapod],
 ) -> WalkResult:
     with contextlib.ExitStack() as stack:
         if simulate:
-            emulator = stack.enter_context(BusEmulator(config.motor_ids))
+            factory = {} if physics is None else {"motor_factory": physics.motor_factory}
+            emulator = stack.enter_context(BusEmulator(config.motor_ids, **factory))
             config = config.with_port(emulator.port)
         guard = stack.enter_context(SignalGuard())
         sinks = [] if on_tick is None else [on_tick]

@@ -17,6 +17,7 @@ COMMAND_MODULES = (
     "linkevo.orchestrator.commands.report",
     "linkevo.orchestrator.commands.pull",
     "linkevo.orchestrator.commands.explore",
+    "linkevo.orchestrator.commands.walkmap",
     "linkevo.orchestrator.commands.cluster",
     "linkevo.orchestrator.commands.hexapod",
 )

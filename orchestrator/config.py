@@ -75,6 +75,9 @@ class GridConfig:
         max_seconds: optional wall-clock budget per trial (seconds, > 0).
         options: per-approach option tables (`options["MAP-AU"] = {...}`) passed to that
             approach's optimizer (`algorithms.make_optimizer`).
+        walk_rerank: at the end of each trial, walk its K lowest-loss linkages that pass
+            the physical checks on the simulated robot (flat floor) and log the best walker
+            (`workers.trial`, docs/walking.md); 0 (the default) walks none.
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -103,6 +106,7 @@ class GridConfig:
     n_angles: int = DEFAULT_ANGLES
     max_seconds: float | None = None
     options: dict[str, Any] = field(default_factory=dict)
+    walk_rerank: int = 0
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -128,11 +132,17 @@ class GridConfig:
         return out
 
     def identity(self) -> dict[str, Any]:
-        """Returns the keys that determine the grid's results (what the grid id hashes)."""
-        return {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS}
+        """Returns the keys that determine the grid's results (what the grid id hashes).
+        `walk_rerank` counts only when it is on, so grids without it keep their ids."""
+        out = {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS}
+        if not out["walk_rerank"]:
+            del out["walk_rerank"]
+        return out
 
 
 KEYS: tuple[str, ...] = tuple(f.name for f in fields(GridConfig))
+MAX_WALK_RERANK = 1000
+"""Walks per trial at most (about 7 minutes of one core)."""
 FLOAT_KEYS: tuple[str, ...] = ("max_seconds", "cpus_per_evaluator", "trial_cpus", "server_outage_s")
 """Keys read as floats when the TOML gives an integer (`trial_cpus = 0`)."""
 
@@ -203,6 +213,9 @@ def _validate(cfg: GridConfig) -> None:
     _check_int(cfg, "n_angles", MIN_ANGLES)
     for key in ("seed", "max_concurrent_trials", "max_retries", "evaluators_per_trial"):
         _check_int(cfg, key, 0)
+    _check_int(cfg, "walk_rerank", 0)
+    if cfg.walk_rerank > MAX_WALK_RERANK:
+        raise _fail("walk_rerank", cfg.walk_rerank, f"allowed: 0 to {MAX_WALK_RERANK}")
     _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)
     _check_number(cfg, "server_outage_s", 0.0, strict=True)
     if cfg.trial_cpus != "auto":

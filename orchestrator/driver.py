@@ -134,6 +134,7 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
                 n_angles=cfg.n_angles,
                 checkpoint_every=cfg.checkpoint_every,
                 max_seconds=cfg.max_seconds,
+                walk_rerank=cfg.walk_rerank,
                 options=dict(cfg.options.get(cell.approach, {})),
             )
             if cell.index == 0:

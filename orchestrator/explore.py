@@ -5,7 +5,10 @@ The page shows a repertoire as a heatmap of loss (4-D maps folded into 2-D tiles
 folding chosen on the page), each cell's linkage with its animated foot path, loss,
 descriptors and physical checks (`sim.physical`), filters on the checks, a build sheet and
 the `linkevo pull RUN_ID:CELL` command for a clicked cell, and two pinned cells side by
-side. A grid's page holds every repertoire trial behind a trial picker.
+side. Where the trial has a walk map (`linkevo walkmap`), the map can be coloured by the
+distance the simulated robot walks on a floor, filtered on "walks at least" and "does not
+break", and a cell's panel shows its predicted distances. A grid's page holds every
+repertoire trial behind a trial picker.
 
 Each trial's cells travel as gzip-compressed JSON (base64) in the page, inflated by the
 browser's own `DecompressionStream` when the trial is shown, so the page needs no network
@@ -63,7 +66,12 @@ class TrialRun:
     n_angles: int
 
 
-def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = None) -> dict:
+def repertoire_view(
+    table: pd.DataFrame,
+    trial: TrialRun,
+    drawn: int | None = None,
+    walks: pd.DataFrame | None = None,
+) -> dict:
     """Returns the page's data of one repertoire.
 
     Args:
@@ -71,16 +79,19 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
             loss, error, desc_<d>, bin_<d> and genome (56,).
         trial: the run it came from.
         drawn: draw the linkage of only the `drawn` lowest-loss cells (None: every cell).
+        walks: the trial's walk map (`walkmap.parquet`), or None.
 
     Returns:
         A JSON-able dict: the trial's identity, the descriptor names and bins per
         descriptor, and `cells`, one per row in ascending loss: c (flat cell), b (bins, D),
         l (loss), d (descriptors, D), e (failed angles), k (checks: turns fully, buildable,
         smallest transmission angle in degrees, toggle passages, largest stretch, width and
-        height in modules) and g (the drawing, or None): n (nodes at the first assembled
+        height in modules), g (the drawing, or None): n (nodes at the first assembled
         angle, (12, 2)), t (node kinds, (12,)), m (beams: start, end, kind, length, modules
-        rounded on their own), f (foot path x and y, (2, A), None at failed angles).
-        Positions are rounded to 0.1 module, lengths to 0.01, descriptors to 0.001.
+        rounded on their own), f (foot path x and y, (2, A), None at failed angles), and
+        with a walk map w: per floor of `floors`, [distance cm, breaks 0/1, reason] or None
+        where the cell was not walked on it. Positions are rounded to 0.1 module, lengths
+        to 0.01, descriptors to 0.001, distances to 0.1 cm.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
     bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))
@@ -111,6 +122,7 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
     descriptors = json_floats(table[desc_columns].to_numpy(), 3)
     loss = json_floats(table["loss"].to_numpy(), 4)
     error = table["error"].to_numpy().astype(int).tolist()
+    floors, walked = _walked(walks)
     cells = []
     for i, cell in enumerate(table["cell"].to_numpy().astype(int).tolist()):
         drawing = None
@@ -144,6 +156,8 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
                 "g": drawing,
             }
         )
+        if floors:
+            cells[-1]["w"] = [walked.get((cell, floor)) for floor in floors]
     return {
         "run_id": trial.run_id,
         "trial_key": trial.trial_key,
@@ -153,8 +167,30 @@ def repertoire_view(table: pd.DataFrame, trial: TrialRun, drawn: int | None = No
         "descriptors": names,
         "resolution": resolution,
         "drawn": len(cells) if drawn is None else min(drawn, len(cells)),
+        "floors": floors,
         "cells": cells,
     }
+
+
+def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str], list]]:
+    """Returns the floors of a walk map (flat first) and, per (cell, floor) walked, the
+    page's [distance cm, breaks 0/1, reason]."""
+    if walks is None or walks.empty:
+        return [], {}
+    walks = walks[walks["status"] == "walked"]
+    floors = sorted(walks["floor"].unique(), key=lambda f: (f != "flat", f))
+    walked = {
+        (int(cell), str(floor)): [round(float(d), 1), int(bool(b)), str(r)]
+        for cell, floor, d, b, r in zip(
+            walks["cell"],
+            walks["floor"],
+            walks["mean_distance_cm"],
+            walks["breaks"],
+            walks["reason"],
+            strict=True,
+        )
+    }
+    return floors, walked
 
 
 def best_view(views: list[dict]) -> int:
@@ -255,6 +291,32 @@ def grid_trials(client, grid_id: str, experiment: str) -> list[TrialRun]:
     return [trial_run(client, run_id) for run_id in runs.run_id]
 
 
+def resolve_repertoires(
+    client, ref: str, experiment: str
+) -> tuple[list[TrialRun], str | None, str | None]:
+    """Returns the repertoire trials a command's REF names (a trial's run id, or every
+    repertoire trial of a grid), the grid's id and its parent run id (None, None for one
+    trial).
+
+    Raises:
+        ExploreError: REF is not an id, or names neither a repertoire trial nor a grid.
+    """
+    from linkevo.orchestrator.report.load import GridNotFoundError, find_grid_run
+
+    if not layout.ID_PATTERN.fullmatch(ref):  # it goes into an MLflow filter string
+        raise ExploreError(
+            f"{ref!r} is neither a run id nor a grid id; allowed: letters, digits, '.', '_', '-'"
+        )
+    try:
+        grid_id, parent = find_grid_run(client, ref, experiment)
+    except GridNotFoundError as no_grid:
+        try:
+            return [trial_run(client, ref)], None, None
+        except ExploreError as exc:
+            raise ExploreError(f"{exc} ({no_grid})") from exc
+    return grid_trials(client, grid_id, experiment), grid_id, parent
+
+
 def explore(
     client,
     trials: list[TrialRun],
@@ -272,13 +334,14 @@ def explore(
         log_to: a run id to log the page to as `explorer.html` (None: do not log).
         progress: called with (trials done, trial) after each trial is read.
     """
-    from linkevo.workers.store.linkages import repertoire
+    from linkevo.workers.store.linkages import repertoire, walk_map
 
     views = []
     with tempfile.TemporaryDirectory(prefix="linkevo-explore-") as tmp:
         for done, trial in enumerate(trials, 1):
             table = repertoire(client, trial.run_id, Path(tmp) / trial.run_id)
-            views.append(repertoire_view(table, trial, drawn))
+            walks = walk_map(client, trial.run_id, Path(tmp) / f"{trial.run_id}-walks")
+            views.append(repertoire_view(table, trial, drawn, walks))
             if progress is not None:
                 progress(done, trial)
         write_bytes_atomic(out, render_page(title, views).encode("utf-8"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import collections
 import csv
 import io
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -87,6 +88,11 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
         "",
         lego_line(doc["lego"]),
         "",
+        *(
+            [f"Predicted walk: {walk_line(doc['predicted_walk'])}.", ""]
+            if doc.get("predicted_walk")
+            else []
+        ),
         "| " + " | ".join(SHEET_COLUMNS) + " |",
         "|" + "---|" * len(SHEET_COLUMNS),
     ]
@@ -194,10 +200,49 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     }
 
 
-def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
+def predicted_walks(client, source: SourceLinkage) -> dict[str, dict]:
+    """Returns the pulled cell's rows of its trial's walk map (`linkevo walkmap`), per floor
+    (distance, breaks, reason), or {} when the cell was not walked."""
+    from linkevo.workers.store.linkages import walk_map
+
+    if source.cell is None or not source.run_id:
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        walks = walk_map(client, source.run_id, Path(tmp))
+    if walks is None:
+        return {}
+    rows = walks[(walks["cell"] == source.cell) & (walks["status"] == "walked")]
+    rows = rows.sort_values("floor", key=lambda f: f != "flat", kind="stable")
+    return {
+        str(r.floor): {
+            "distance_cm": round(float(r.mean_distance_cm), 1),
+            "seconds": float(getattr(r, "seconds", 10.0)),
+            "breaks": bool(r.breaks),
+            "reason": str(r.reason),
+        }
+        for r in rows.itertuples()
+    }
+
+
+def walk_line(walks: dict[str, dict]) -> str:
+    """Returns the predicted walks in one line: the distance per floor, and breaks."""
+    return (
+        "; ".join(
+            f"{floor} {w['distance_cm']:.1f} cm in {w['seconds']:g} s"
+            + (f", breaks ({w['reason']})" if w["breaks"] else "")
+            for floor, w in walks.items()
+        )
+        + " (simulated robot, `linkevo walkmap`)"
+    )
+
+
+def pull(
+    source: SourceLinkage, out: Path, *, gif: bool = False, walks: dict[str, dict] | None = None
+) -> list[Path]:
     """Writes linkage.json, linkage.png, build_sheet.md and .csv, linkage.gif (with `gif`)
     and, when a LEGO build exists, path_overlay.png, layers.png (the exploded layer view)
-    and template.pdf (1:1 on A4 pages) into out."""
+    and template.pdf (1:1 on A4 pages) into out. `walks` (`predicted_walks`) go into the
+    document and the sheet."""
     out.mkdir(parents=True, exist_ok=True)
     genome, mode = from_document(source.document)
     n_angles = int(source.document.get("n_angles", DEFAULT_ANGLES))
@@ -212,6 +257,8 @@ def pull(source: SourceLinkage, out: Path, *, gif: bool = False) -> list[Path]:
     # crank angles, physical checks).
     doc = to_document(genome, mode, n_angles=n_angles, meta=meta)
     doc["lego"] = lego_build(genome, mode, source.fitness, n_angles)
+    if walks:
+        doc["predicted_walk"] = walks
     rows = build_sheet(doc, doc["lego"].get("lengths"), doc["lego"].get("layers"))
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=SHEET_COLUMNS, lineterminator="\n")

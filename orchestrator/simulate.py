@@ -85,10 +85,12 @@ def simulate_source(
     seconds: float,
     repeats: int,
     seed: int = 0,
+    model: str = "lean",
 ) -> tuple[dict, list[Walk]]:
     """Walks the source's linkage `repeats` times on the floor and returns the summary
-    (`sim.walk.summary`, with how the leg was built) and the walks; a linkage that does
-    not turn comes back as `breaks` with no distances and no walks."""
+    (`sim.walk.summary`, with how the leg was built and the robot model, `sim.walk.MODELS`)
+    and the walks; a linkage that does not turn comes back as `breaks` with no distances
+    and no walks."""
     genome, mode = from_document(source.document)
     gait, offsets = gait_of(config)
     where = floor(floor_name)
@@ -104,6 +106,7 @@ def simulate_source(
             "breaks": True,
             "reason": str(exc),
             "leg": "none",
+            "model": model,
         }
         return refused, []
     walks = field_trials(
@@ -113,9 +116,10 @@ def simulate_source(
         seed=seed,
         gait=gait,
         offsets_deg=offsets,
-        settings=WalkSettings(seconds=seconds),
+        settings=WalkSettings(seconds=seconds, model=model),
     )
     result = summary(walks, where, seconds)
+    result["model"] = model
     result["leg"] = "LEGO build" if leg.built else "as evolved"
     if leg.note:
         result["leg_note"] = leg.note
@@ -175,6 +179,7 @@ def log_simulated(
             "repeats": str(len(result["distance_cm"])),
             "seed": str(seed),
             "leg": result.get("leg", ""),
+            "model": result.get("model", ""),
         },
         metrics=metrics,
         tags={"breaks": str(result["breaks"]), "reason": result["reason"][:5000]},

@@ -57,6 +57,7 @@ def choose_robots(
     config: RobotConfig,
     seconds: float,
     repeats: int,
+    model: str = "lean",
     progress: Callable[[str], None] = print,
 ) -> list[Robot]:
     """Returns the first and the modified robot of each MAP-Elites approach in the grid."""
@@ -99,7 +100,7 @@ def choose_robots(
                 document=to_document(np.asarray(row["genome"], dtype=float), mode),
             )
             result, _ = simulate_source(
-                source, "flat", config=config, seconds=seconds, repeats=repeats
+                source, "flat", config=config, seconds=seconds, repeats=repeats, model=model
             )
             distance = result["mean_distance_cm"]
             scored.append(
@@ -126,6 +127,7 @@ def predict_table_one(
     config: RobotConfig,
     seconds: float = 10.0,
     repeats: int = 5,
+    model: str = "lean",
     log: bool = True,
     progress: Callable[[str], None] = print,
 ) -> pd.DataFrame:
@@ -133,13 +135,13 @@ def predict_table_one(
     the distances walked, whether it breaks and why, and where the linkage came from."""
     robots = choose_robots(
         client, grid_id, experiment, config=config, seconds=seconds, repeats=repeats,
-        progress=progress,
+        model=model, progress=progress,
     )  # fmt: skip
     rows = []
     for robot in robots:
         for floor in FLOORS:
             result, _ = simulate_source(
-                robot.source, floor, config=config, seconds=seconds, repeats=repeats
+                robot.source, floor, config=config, seconds=seconds, repeats=repeats, model=model
             )
             run_id = log_simulated(uri, robot.source, robot.robot, result, 0) if log else ""
             rows.append(

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numpy as np
+
 LEG_SLOTS = ("left-front", "left-middle", "left-rear", "right-front", "right-middle", "right-rear")
 """Where a leg is mounted; a motor's `name` in the robot config picks its slot."""
 TRIPOD_OFFSETS_DEG = {
@@ -38,7 +40,12 @@ class Motor:
     """The MX-28AT at 12 V as a DC motor: torque `stall * (v/voltage - w/w0)` for a supply
     voltage v in [-voltage, voltage] and speed w, w0 the no-load speed (datasheet: 2.5 N·m
     stall, 55 rpm no load at 12 V). Its firmware velocity loop sets
-    `v = ke * (w_goal + loop_gain * (w_goal - w))`, clipped to the supply."""
+    `v = ke * (w_goal + loop_gain * (w_goal - w))`, clipped to the supply.
+
+    Unclipped, that loop is a velocity servo, torque `servo_gain * (w_goal - w)`; the clip
+    bounds its torque by the torque-speed line (`torque_limits`). The walk simulates it so
+    (`sim.walk`): MuJoCo integrates the servo implicitly and the limits follow the speed
+    at every control tick."""
 
     stall_nm: float = 2.5
     no_load_rpm: float = 55.0
@@ -56,6 +63,17 @@ class Motor:
     def kt_over_r(self) -> float:
         """Torque per volt at stall, N·m per volt."""
         return self.stall_nm / self.voltage
+
+    @property
+    def servo_gain(self) -> float:
+        """Torque per rad/s of speed error of the unclipped velocity loop, N·m·s/rad."""
+        return self.kt_over_r * self.ke * (1.0 + self.loop_gain)
+
+    def torque_limits(self, speed: np.ndarray) -> np.ndarray:
+        """Returns (..., 2) the least and largest torque (N·m) at the supply's limits, for
+        speeds (...) in rad/s: the torque-speed line at -voltage and +voltage."""
+        back = self.kt_over_r * self.ke * np.asarray(speed, dtype=float)
+        return np.stack([-self.stall_nm - back, self.stall_nm - back], axis=-1)
 
 
 @dataclass(frozen=True)

@@ -4,7 +4,7 @@ robot had at the start), with what a builder needs to trust the number.
 
 A walk settles the robot on the floor for `settle_s` with the legs held at their phases,
 then starts the gait's clock (`sim.gait.PhasePid`, the real robot's controller, ticking at
-its `rate_hz`); each motor's firmware velocity loop runs every `motor_dt`. Repeats differ by
+its `rate_hz`); each motor is its firmware velocity loop (`sim.robot.Motor`). Repeats differ by
 a seeded perturbation of the start, as hand-placed trials do: heading within ±3°, position
 within ±5 mm, each leg's phase within the alignment tolerance (±3°).
 """
@@ -22,9 +22,15 @@ import mujoco
 import numpy as np
 
 from linkevo.sim.gait import GaitConfig, PhasePid
+from linkevo.sim.lean_model import LEAN_TIMESTEP_S, Coupling, build_lean_robot
 from linkevo.sim.leg import Leg
 from linkevo.sim.robot import LEG_SLOTS, TRIPOD_OFFSETS_DEG, Floor, Frame, Motor
 from linkevo.sim.walk_model import TIMESTEP_S, RobotModel, build_robot
+
+MODELS = {"lean": (build_lean_robot, LEAN_TIMESTEP_S), "full": (build_robot, TIMESTEP_S)}
+"""The robot models a walk can run on, with their default physics steps: `lean` (each leg
+reduced to the parts that meet the floor, `sim.lean_model`; the default) and `full` (every
+beam a body, `sim.walk_model`; for pictures and cross-checks)."""
 
 STALL_LAG_DEG = 45.0
 """A leg this far behind the clock with its motor at the supply limit has stalled."""
@@ -50,18 +56,23 @@ class WalkSettings:
     Attributes:
         seconds: walking time after settling.
         settle_s: time on the floor with the legs held, before the clock starts.
-        timestep: physics step (s).
-        motor_dt: the motor firmware's velocity-loop period (s), a multiple of timestep.
+        model: "lean" or "full" (`MODELS`).
+        timestep: physics step (s); None for the model's own.
         loads_every: record pin loads and loop closure every this many control ticks.
         reverse: turn the cranks backwards (the gait's speed negated).
     """
 
     seconds: float = 10.0
     settle_s: float = 0.5
-    timestep: float = TIMESTEP_S
-    motor_dt: float = 0.002
+    model: str = "lean"
+    timestep: float | None = None
     loads_every: int = 2
     reverse: bool = False
+
+    @property
+    def step(self) -> float:
+        """The physics step the walk runs at."""
+        return self.timestep or MODELS[self.model][1]
 
 
 @dataclass(frozen=True)
@@ -140,6 +151,8 @@ def walk(
     """
     gait = gait or GaitConfig()
     settings = settings or WalkSettings()
+    if settings.model not in MODELS:
+        raise ValueError(f"robot model {settings.model!r}: allowed {', '.join(MODELS)}")
     motor = motor or Motor()
     offsets_deg = offsets_deg or TRIPOD_OFFSETS_DEG
     if isinstance(legs, Leg):
@@ -155,13 +168,12 @@ def walk(
         top = START_JITTER["phase_deg"]
         jitter = np.radians(rng.integers(-top, top + 1, 6))
     start = dict(zip(LEG_SLOTS, offsets + jitter, strict=True))
+    build = MODELS[settings.model][0]
     while True:
-        robot = build_robot(
-            legs, start, floor, frame=frame, motor=motor, timestep=settings.timestep
-        )
+        robot = build(legs, start, floor, frame=frame, motor=motor, timestep=settings.step)
         with _quiet_engine():
             result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
-        finer = settings.timestep / 2
+        finer = settings.step / 2
         if not result.diverged or finer < MIN_TIMESTEP_S - 1e-12:
             return result
         # A stiff linkage can blow up at the default step: walk it again at half the step.
@@ -198,8 +210,8 @@ class _Run:
         self.frame, self.offsets = frame, offsets
         m = robot.model
         self.data = mujoco.MjData(m)
-        self.tick_steps = max(1, round(1.0 / gait.rate_hz / settings.timestep))
-        self.motor_steps = max(1, round(settings.motor_dt / settings.timestep))
+        self.tick_steps = max(1, round(1.0 / gait.rate_hz / settings.step))
+        self.coupling: Coupling | None = robot.coupling  # type: ignore[assignment]
         body_leg = np.full(m.nbody, -1)
         for i, slot in enumerate(LEG_SLOTS):
             for b in range(m.nbody):
@@ -212,6 +224,8 @@ class _Run:
         m, d, robot = self.robot.model, self.data, self.robot
         d.qpos[0:2] += shift
         d.qpos[3:7] = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
+        if self.coupling is not None:
+            self.coupling.update(m, d)
         mujoco.mj_forward(m, d)
         hold = PhasePid(dataclasses.replace(self.gait, speed_rpm=0.0), self.offsets)
         hold.reset(0.0)
@@ -225,7 +239,7 @@ class _Run:
         self.phase0 = self.phases()
         n_ticks = round(self.settings.seconds * self.gait.rate_hz)
         rec = {k: [] for k in ("t", "body", "mat", "lag", "torque", "sat", "feet", "contact")}
-        rec |= {"frame": [], "pins": [], "loops": [], "phase": [], "qpos": []}
+        rec |= {"frame": [], "pins": [], "loops": [], "phase": [], "qpos": [], "poses": []}
         for tick in range(n_ticks):
             if not self._tick(pid):
                 return self._diverged()
@@ -236,16 +250,17 @@ class _Run:
         return self.robot.start_phases + self.data.qpos[self.robot.crank_qpos]
 
     def _tick(self, pid: PhasePid) -> bool:
-        """One control tick: the gait's command, then the motors' loop over the tick."""
+        """One control tick: the gait's command as the motors' speed goal, their torque
+        limits at the speed they turn now, the lean model's couplings re-centred, then the
+        physics over the tick."""
         m, d, motor, robot = self.robot.model, self.data, self.motor, self.robot
         rpm = np.clip(pid.rpm(d.time, self.phases()), -motor.velocity_limit_rpm,
                       motor.velocity_limit_rpm)  # fmt: skip
-        goal = rpm * (2 * math.pi / 60)
-        for _ in range(self.tick_steps // self.motor_steps):
-            speed = d.qvel[robot.crank_dof]
-            volts = motor.ke * (goal + motor.loop_gain * (goal - speed))
-            d.ctrl[robot.actuators] = np.clip(volts, -motor.voltage, motor.voltage)
-            mujoco.mj_step(m, d, nstep=self.motor_steps)
+        d.ctrl[robot.actuators] = rpm * (2 * math.pi / 60)
+        m.actuator_forcerange[robot.actuators] = motor.torque_limits(d.qvel[robot.crank_dof])
+        if self.coupling is not None:
+            self.coupling.update(m, d)
+        mujoco.mj_step(m, d, nstep=self.tick_steps)
         # MuJoCo resets the state when accelerations blow up, and counts it as a warning.
         blown = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
         return not blown and bool(np.isfinite(d.qpos).all()) and abs(d.qpos[2]) < 10.0
@@ -258,8 +273,11 @@ class _Run:
         rec["phase"].append(self.phases())
         rec["qpos"].append(d.qpos.copy())
         rec["lag"].append(pid.errors(d.time, self.phases()))
-        rec["torque"].append(d.actuator_force[robot.actuators].copy())
-        rec["sat"].append(np.abs(d.ctrl[robot.actuators]) >= 0.999 * self.motor.voltage)
+        force = d.actuator_force[robot.actuators]
+        limits = m.actuator_forcerange[robot.actuators]
+        rec["torque"].append(force.copy())
+        margin = 1e-3 * self.motor.stall_nm
+        rec["sat"].append((force <= limits[:, 0] + margin) | (force >= limits[:, 1] - margin))
         rec["feet"].append(d.site_xpos[robot.foot_sites].copy())
         geoms = d.contact.geom[: d.ncon] if d.ncon else np.zeros((0, 2), dtype=int)
         touching = geoms.ravel()
@@ -269,6 +287,12 @@ class _Run:
         contact[legs[legs >= 0]] = True
         rec["contact"].append(contact)
         if not loads:
+            return
+        if self.coupling is not None:
+            n = len(self.coupling.equalities)  # equality rows come first, in id order
+            rec["poses"].append(self.coupling.poses(d))
+            rec["pins"].append(d.efc_force[:n].copy())
+            rec["loops"].append(np.abs(d.efc_pos[:n]) * self.coupling.scale)
             return
         mujoco.mj_rnePostConstraint(m, d)
         tree = np.linalg.norm(d.cfrc_int[robot.leg_bodies, 3:], axis=1)
@@ -291,9 +315,9 @@ class _Run:
         saturated = np.array(rec["sat"]).mean(axis=0)
         sign = 1.0 if self.gait.speed_rpm >= 0 else -1.0
         lag = np.degrees(np.max(sign * np.array(rec["lag"]), axis=0))  # behind the clock
-        pins = np.concatenate(rec["pins"])
+        pins = np.concatenate(rec["pins"]) if self.coupling is None else self._statics(rec)
         percentiles = tuple(float(v) for v in np.percentile(pins, [50, 95, 99, 100]))
-        loops = np.concatenate(rec["loops"]) if self.n_loops else np.zeros(1)
+        loops = np.concatenate(rec["loops"]) if rec["loops"][0].size else np.zeros(1)
         frame_contact = float(np.mean(rec["frame"]))
         clearance = float(body[:, 2].min() - self.frame.height / 2)
         walk = Walk(
@@ -304,7 +328,9 @@ class _Run:
             clearance_m=clearance,
             max_pitch_deg=float(np.abs(pitch).max()),
             max_roll_deg=float(np.abs(roll).max()),
-            foot_slip_mm_s=_foot_slip(np.array(rec["feet"]), np.array(rec["t"])),
+            foot_slip_mm_s=_foot_slip(
+                np.array(rec["feet"]), np.array(rec["contact"]), np.array(rec["t"])
+            ),
             torque_p95=float(np.percentile(torque, 95)),
             torque_max=float(torque.max()),
             saturated=saturated,
@@ -322,10 +348,25 @@ class _Run:
                 "qpos": np.array(rec["qpos"]),
             },
             model=self.robot.model,
-            timestep=self.settings.timestep,
+            timestep=self.settings.step,
         )
         reason = break_reason(walk, lag)
         return dataclasses.replace(walk, breaks=bool(reason), reason=reason)
+
+    def _statics(self, rec: dict) -> np.ndarray:
+        """Returns every pin's force at every recorded tick, all legs (the lean model's
+        pins, from the statics of each leg's mechanism under its couplings' forces)."""
+        coupling = self.coupling
+        poses, forces = np.array(rec["poses"]), np.array(rec["pins"])  # (S, 6), (S, C)
+        pins = []
+        for statics in {id(s): s for s in coupling.statics}.values():  # legs alike: one solve
+            slots = [i for i, s in enumerate(coupling.statics) if s is statics]
+            wrench = np.concatenate(
+                [forces[:, coupling.leg == i].reshape(len(forces), -1, 3) for i in slots]
+            )  # (S * slots, K, 3): x, z, angle, in the frame's coordinates
+            wrench = wrench * np.array([-statics.leg.facing(), 1.0, 1.0])  # linkage's frame
+            pins.append(statics.pin_forces(poses[:, slots].T.ravel(), wrench).ravel())
+        return np.concatenate(pins)
 
     def _diverged(self) -> Walk:
         nan = math.nan
@@ -335,7 +376,7 @@ class _Run:
             "the simulation diverged (a loop flew apart): the linkage cannot be assembled "
             "as a rigid LEGO build",
             {},
-            timestep=self.settings.timestep,
+            timestep=self.settings.step,
             diverged=True,
         )  # fmt: skip
 
@@ -441,12 +482,13 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
-def _foot_slip(feet: np.ndarray, t: np.ndarray) -> float:
-    """Mean horizontal foot speed (mm/s) while a foot is down (within 3 mm of the lowest
-    height it reaches), over the feet (T, 6, 3) sampled at times t (T,)."""
+def _foot_slip(feet: np.ndarray, contact: np.ndarray, t: np.ndarray) -> float:
+    """Mean horizontal foot speed (mm/s) while a foot is down: its leg touches the floor
+    and the foot is within 3 mm of the lowest height it reaches, over the feet (T, 6, 3)
+    and contacts (T, 6) sampled at times t (T,)."""
     if len(t) < 2:
         return math.nan
-    down = feet[:, :, 2] <= feet[:, :, 2].min(axis=0) + 0.003
+    down = contact & (feet[:, :, 2] <= feet[:, :, 2].min(axis=0) + 0.003)
     both = down[1:] & down[:-1]
     dt = np.diff(t)[:, None]
     step = np.linalg.norm(np.diff(feet[:, :, :2], axis=0), axis=2) / np.where(dt > 0, dt, np.inf)

@@ -1,5 +1,8 @@
 """Provides `build_robot`: the hexapod with six linkage legs as a MuJoCo model, built with
-`mujoco.MjSpec`.
+`mujoco.MjSpec`, every beam a body (the full model; `sim.lean_model` has the lean one),
+and what both models share: the physics options, floor and frame (`robot_spec`), where a
+leg sits (`leg_frame`), its motor (`add_motor`) and which beams can touch the floor
+(`floor_reach`).
 
 Each leg is a kinematic tree: one body per rigid part (a beam, or a beam and its
 extensions), a hinge per pin, the crank's hinge driven by the leg's motor; every other pin
@@ -38,13 +41,13 @@ by a few percent (a flat stance then beats its no-slip bound) and loops open by 
 PIN_DAMPING = 1e-4
 """Viscous friction of a LEGO pin, N·m per rad/s (an estimate; it only damps rattling)."""
 _HINGE = mujoco.mjtJoint.mjJNT_HINGE
-_LEG_CONTACT = {"contype": 2, "conaffinity": 1}  # touches the floor, never another beam
+LEG_CONTACT = {"contype": 2, "conaffinity": 1}  # touches the floor, never another beam
 CONTACT_REACH = 4.0
 """A beam whose lowest point over the turn stays more than this many modules above the
 leg's lowest point cannot reach the floor unless the robot tips over: it gets no contact."""
 
 
-def _floor_reach(leg: Leg) -> np.ndarray:
+def floor_reach(leg: Leg) -> np.ndarray:
     """(B,) bool: the beams that come within CONTACT_REACH of the leg's lowest point."""
     heights = leg.paths[leg.beams, :, 1]  # (B, 2, A)
     low = heights.min(axis=(1, 2))
@@ -65,6 +68,7 @@ class RobotModel:
         loop_pins: (L,) the connect equalities, one per loop-closing pin.
         start_phases: (6,) the crank angle (radians) each leg was built at.
         stroke_m: (6,) each leg's stance stroke in metres.
+        coupling: the lean model's `sim.lean_model.Coupling` (None for the full model).
     """
 
     model: mujoco.MjModel
@@ -78,6 +82,7 @@ class RobotModel:
     loop_pins: np.ndarray
     start_phases: np.ndarray
     stroke_m: np.ndarray
+    coupling: object | None = None
 
 
 def build_robot(
@@ -102,9 +107,34 @@ def build_robot(
     """
     frame = frame or Frame()
     motor = motor or Motor()
+    check_slots(legs, phases)
+    spec, body = robot_spec(floor, frame, timestep)
+    builders = [_LegBuilder(spec, body, s, legs[s], phases[s], frame, timestep) for s in LEG_SLOTS]
+    for slot in LEG_SLOTS:
+        add_motor(spec, slot, motor)
+    lowest = min(leg.lowest for leg in builders)
+    lowest = min(lowest, -frame.height / 2)
+    body.pos = [0.0, 0.0, -lowest + drop]
+    model = spec.compile()
+    return robot_model(
+        model,
+        legs,
+        phases,
+        leg_bodies=[n for b in builders for n in b.body_names],
+        loop_pins=[n for b in builders for n in b.pin_names],
+    )
+
+
+def check_slots(legs: dict[str, Leg], phases: dict[str, float]) -> None:
+    """Raises ValueError naming the slots without a leg or a phase."""
     missing = [s for s in LEG_SLOTS if s not in legs or s not in phases]
     if missing:
         raise ValueError(f"no leg or phase for slot(s) {missing}; every one of {LEG_SLOTS}")
+
+
+def robot_spec(floor: Floor, frame: Frame, timestep: float, extra_kg: float = 0.0):
+    """Returns (spec, frame body): the physics options, the floor and the frame (a free
+    box of the frame's mass plus `extra_kg`) that both robot models share."""
     spec = mujoco.MjSpec()
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
@@ -113,9 +143,8 @@ def build_robot(
     # Dense constraint Jacobians: with the sparse ones (MuJoCo's choice from 60 dofs) some
     # study linkages blow up within 10 steps; dense costs nothing measurable here.
     spec.option.jacobian = mujoco.mjtJacobian.mjJAC_DENSE
-    world = spec.worldbody
     _add_scenery(spec)
-    world.add_geom(
+    spec.worldbody.add_geom(
         name="floor",
         material="floor",
         type=mujoco.mjtGeom.mjGEOM_PLANE,
@@ -128,23 +157,66 @@ def build_robot(
         solref=[max(floor.solref[0], 2 * timestep), floor.solref[1]],
         solimp=[*floor.solimp, 0.5, 2.0],
     )
-    body = world.add_body(name="frame")
+    body = spec.worldbody.add_body(name="frame")
     body.add_freejoint(name="frame")
     body.add_geom(
         name="frame",
         type=mujoco.mjtGeom.mjGEOM_BOX,
         size=[frame.length / 2, frame.width / 2, frame.height / 2],
-        mass=frame.mass_kg,
+        mass=frame.mass_kg + extra_kg,
         rgba=[0.2, 0.25, 0.3, 1],
-        **_LEG_CONTACT,
+        **LEG_CONTACT,
     )
-    builders = [_LegBuilder(spec, body, s, legs[s], phases[s], frame, timestep) for s in LEG_SLOTS]
-    for leg in builders:
-        leg.add_actuator(spec, motor)
-    lowest = min(leg.lowest for leg in builders)
-    lowest = min(lowest, -frame.height / 2)
-    body.pos = [0.0, 0.0, -lowest + drop]
-    model = spec.compile()
+    return spec, body
+
+
+def leg_frame(slot: str, leg: Leg, frame: Frame):
+    """Returns a function mapping a linkage point (2,) in modules on a layer to its (3,)
+    position in the frame's coordinates: the leg's plane is the frame's side plane, its
+    y axis up, mounted facing the way its stance pushes the robot (`Leg.facing`)."""
+    side = 1.0 if slot.startswith("left") else -1.0
+    along = {"front": 1.0, "middle": 0.0, "rear": -1.0}[slot.split("-")[1]]
+    axle = np.array([along * frame.leg_spacing, side * frame.width / 2, 0.0])
+    facing = leg.facing()
+
+    def world(node: np.ndarray, layer: int) -> np.ndarray:
+        lateral = side * (frame.leg_plane + layer * LAYER_PITCH_M)
+        x, y = np.asarray(node) * UNIT_M
+        return axle + np.array([-facing * x, lateral, y])
+
+    return world
+
+
+def add_motor(spec: mujoco.MjSpec, slot: str, motor: Motor) -> None:
+    """The slot's motor on its crank hinge: the velocity servo of `Motor` (control: the
+    speed goal in rad/s; the walk sets its force range to `Motor.torque_limits` every
+    control tick) and the rotor's inertia as the hinge's armature."""
+    gain = motor.servo_gain
+    spec.add_actuator(
+        name=f"{slot}/motor",
+        target=f"{slot}/crank",
+        trntype=mujoco.mjtTrn.mjTRN_JOINT,
+        gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+        gainprm=[gain] + [0] * 9,
+        biastype=mujoco.mjtBias.mjBIAS_AFFINE,
+        biasprm=[0, 0, -gain] + [0] * 7,
+        forcelimited=1,
+        forcerange=[-motor.stall_nm, motor.stall_nm],
+    )
+    spec.joint(f"{slot}/crank").armature = motor.armature
+
+
+def robot_model(
+    model: mujoco.MjModel,
+    legs: dict[str, Leg],
+    phases: dict[str, float],
+    *,
+    leg_bodies: list[str],
+    loop_pins: list[str] = (),
+    coupling: object | None = None,
+) -> RobotModel:
+    """Returns the compiled model with where its parts are (names as both builders give
+    them)."""
 
     def ids(kind: mujoco.mjtObj, names: list[str]) -> np.ndarray:
         return np.array([mujoco.mj_name2id(model, kind, n) for n in names], dtype=np.int64)
@@ -158,10 +230,11 @@ def build_robot(
         crank_dof=model.jnt_dofadr[cranks].astype(np.int64),
         actuators=ids(mujoco.mjtObj.mjOBJ_ACTUATOR, [f"{s}/motor" for s in LEG_SLOTS]),
         foot_sites=ids(mujoco.mjtObj.mjOBJ_SITE, [f"{s}/foot" for s in LEG_SLOTS]),
-        leg_bodies=ids(mujoco.mjtObj.mjOBJ_BODY, [n for b in builders for n in b.body_names]),
-        loop_pins=ids(mujoco.mjtObj.mjOBJ_EQUALITY, [n for b in builders for n in b.pin_names]),
+        leg_bodies=ids(mujoco.mjtObj.mjOBJ_BODY, leg_bodies),
+        loop_pins=ids(mujoco.mjtObj.mjOBJ_EQUALITY, list(loop_pins)),
         start_phases=np.array([phases[s] for s in LEG_SLOTS], dtype=float),
         stroke_m=np.array([legs[s].stance_stroke() * UNIT_M for s in LEG_SLOTS]),
+        coupling=coupling,
     )
 
 
@@ -196,19 +269,15 @@ class _LegBuilder:
     ) -> None:
         self.slot = slot
         self._timestep = timestep
-        side = 1.0 if slot.startswith("left") else -1.0
-        along = {"front": 1.0, "middle": 0.0, "rear": -1.0}[slot.split("-")[1]]
-        self._axle = np.array([along * frame.leg_spacing, side * frame.width / 2, 0.0])
-        self._side = side
+        self._world = leg_frame(slot, leg, frame)
         self._facing = leg.facing()
-        self._plane = frame.leg_plane
         nodes = leg.pose(phase)  # (M, 2) modules
         self.body_names: list[str] = []
         self.pin_names: list[str] = []
         owner: dict[int, tuple[object, np.ndarray, int]] = {}  # node -> (body, origin, layer)
         for node in leg.frame_nodes:
             owner[int(node)] = (frame_body, np.zeros(3), 0)
-        self._reach = _floor_reach(leg)
+        self._reach = floor_reach(leg)
         self.lowest = np.inf
         for b in np.flatnonzero(leg.part == -1):  # beams fixed to the frame
             self._add_beam(frame_body, np.zeros(3), leg, nodes, b, crank=False)
@@ -249,12 +318,6 @@ class _LegBuilder:
             size=[0.004, 0, 0],
         )
 
-    def _world(self, node: np.ndarray, layer: int) -> np.ndarray:
-        """(3,) frame-relative position of a linkage point on a layer."""
-        lateral = self._side * (self._plane + layer * LAYER_PITCH_M)
-        x, y = node * UNIT_M
-        return self._axle + np.array([-self._facing * x, lateral, y])
-
     def _add_beam(self, body, origin, leg: Leg, nodes: np.ndarray, b: int, crank: bool) -> None:
         """Adds beam b as a capsule (a sphere when its ends meet) on its layer; it touches
         the floor only if some crank angle brings it within reach (`_floor_reach`)."""
@@ -262,7 +325,7 @@ class _LegBuilder:
         start = self._world(nodes[leg.beams[b, 0]], layer)
         end = self._world(nodes[leg.beams[b, 1]], layer)
         length = float(np.linalg.norm(end - start))
-        contact = _LEG_CONTACT if self._reach[b] else {"contype": 0, "conaffinity": 0}
+        contact = LEG_CONTACT if self._reach[b] else {"contype": 0, "conaffinity": 0}
         geom = {
             "mass": max(length / UNIT_M, 0.5) * BEAM_KG_PER_MODULE,
             "rgba": [0.85, 0.6, 0.1, 1] if crank else [0.75, 0.75, 0.78, 1],
@@ -295,20 +358,3 @@ class _LegBuilder:
             solref=[2 * self._timestep, 1.0],
         )
         self.pin_names.append(name)
-
-    def add_actuator(self, spec: mujoco.MjSpec, motor: Motor) -> None:
-        """The leg's motor: input the supply voltage, torque kt/R * (v - ke * w)."""
-        gain = motor.kt_over_r
-        spec.add_actuator(
-            name=f"{self.slot}/motor",
-            target=f"{self.slot}/crank",
-            trntype=mujoco.mjtTrn.mjTRN_JOINT,
-            gaintype=mujoco.mjtGain.mjGAIN_FIXED,
-            gainprm=[gain] + [0] * 9,
-            biastype=mujoco.mjtBias.mjBIAS_AFFINE,
-            biasprm=[0, 0, -gain * motor.ke] + [0] * 7,
-            ctrllimited=1,
-            ctrlrange=[-motor.voltage, motor.voltage],
-        )
-        joint = spec.joint(f"{self.slot}/crank")
-        joint.armature = motor.armature

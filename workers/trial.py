@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import json
+import math
 import platform
 import time
 from dataclasses import asdict, dataclass, field
@@ -12,7 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.algorithms import Optimizer, eval_fitness, make_optimizer
+from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.physical import physical_checks
 from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
@@ -34,7 +37,7 @@ from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.plots.repertoire import draw_trial_maps
 from linkevo.workers.recorders import MetricsCsv, Recorder
 from linkevo.workers.store.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
-from linkevo.workers.store.run_layout import BEST_JSON
+from linkevo.workers.store.run_layout import BEST_JSON, BEST_WALKER, WALK_RERANK
 
 CHECKPOINT_DIR = "checkpoint"
 METRICS_FILE = "metrics.csv"
@@ -76,6 +79,8 @@ class TrialSpec:
         max_seconds: optional wall-clock limit of one `run_trial` call, checked after each
             iteration (so at least one runs).
         options: approach-specific settings passed to `algorithms.make_optimizer`.
+        walk_rerank: walk this many of the final lowest-loss linkages that pass the physical
+            checks on the simulated robot (`rerank_by_walking`); 0: none.
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -92,6 +97,7 @@ class TrialSpec:
     checkpoint_every: int = 10
     max_seconds: float | None = None
     options: dict = field(default_factory=dict)
+    walk_rerank: int = 0
 
     def __post_init__(self) -> None:
         def fail(message: str) -> None:
@@ -114,6 +120,8 @@ class TrialSpec:
             fail(f"seed must be a non-negative integer, got {self.seed!r}")
         if not _is_int(self.n_angles) or self.n_angles < MIN_ANGLES:
             fail(f"n_angles must be an integer >= {MIN_ANGLES}, got {self.n_angles!r}")
+        if not _is_int(self.walk_rerank) or self.walk_rerank < 0:
+            fail(f"walk_rerank must be an integer >= 0, got {self.walk_rerank!r}")
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
             fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
         if self.max_seconds is not None and not (
@@ -268,6 +276,41 @@ def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
     return loss
 
 
+def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Path) -> float:
+    """Walks the trial's `spec.walk_rerank` lowest-loss final linkages that pass the
+    physical checks once each on the simulated robot (flat floor, the walk map's protocol,
+    `sim.walk_map`), writes `walk_rerank.parquet` (their rows, with loss) and the furthest
+    walker that does not break as `best_walker.json`; returns its distance in cm (NaN when
+    none walks).
+
+    Args:
+        view: the optimizer's final `view()`: genome (N, 56), loss (N,), cell (N,) where
+            it has cells.
+    """
+    from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_cells  # MuJoCo: only when asked
+
+    genomes = np.asarray(view["genome"], dtype=np.float64)
+    loss = np.asarray(view["loss"], dtype=np.float64)
+    cells = np.asarray(view.get("cell", np.arange(len(loss))), dtype=np.int64)
+    batch = decode(genomes, spec.mode)
+    order = np.lexsort((cells, loss))
+    keep = order[physical_checks(batch, simulate(batch, spec.n_angles)).buildable[order]]
+    keep = keep[: spec.walk_rerank]
+    rows = walk_cells(CellBatch(cells[keep], genomes[keep], spec.mode, ("flat",)))
+    distance = np.array([r["mean_distance_cm"] for r in rows], dtype=float)
+    sound = np.array([r["status"] == "walked" and not r["breaks"] for r in rows], dtype=bool)
+    columns = {c: np.array([r[c] for r in rows]) for c in COLUMNS}
+    write_parquet_atomic(
+        out_dir / WALK_RERANK, {**columns, "loss": loss[keep], "genome": genomes[keep]}
+    )
+    if not (sound & np.isfinite(distance)).any():
+        return math.nan
+    best = int(np.nanargmax(np.where(sound, distance, np.nan)))
+    meta = {"cell": int(cells[keep][best]), "walk_cm": float(distance[best])}
+    write_json_atomic(out_dir / BEST_WALKER, to_document(genomes[keep][best], spec.mode, meta=meta))
+    return float(distance[best])
+
+
 def run_trial(
     spec: TrialSpec,
     evaluator: Evaluator,
@@ -365,6 +408,10 @@ def run_trial(
     _checkpoint(spec, optimizer.state_dict(), optimizer, optimizer.iteration, folder)
     best_loss = _write_final(spec, optimizer, out_dir)
     metrics = optimizer.metrics()
+    if spec.walk_rerank:
+        walked = rerank_by_walking(spec, optimizer.view(), out_dir)
+        metrics["best_walk_cm"] = walked
+        recorder.log_iteration(optimizer.iteration, {"best_walk_cm": walked})
     result = TrialResult(
         spec=spec,
         out_dir=out_dir,

@@ -6,7 +6,6 @@ import argparse
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.workers.store import run_layout as layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -59,17 +58,10 @@ def handle(args: argparse.Namespace) -> int:
         PAGE_ARTIFACT,
         ExploreError,
         explore,
-        grid_trials,
-        trial_run,
+        resolve_repertoires,
     )
-    from linkevo.orchestrator.report.load import GridNotFoundError, find_grid_run
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
-    if not layout.ID_PATTERN.fullmatch(args.ref):  # it goes into an MLflow filter string
-        raise CliError(
-            f"{args.ref!r} is neither a run id nor a grid id; allowed: letters, digits, '.', "
-            "'_', '-'"
-        )
     if args.drawn is not None and args.drawn < 1:
         raise CliError(f"--drawn {args.drawn}: give the number of cells to draw, >= 1")
     out = args.out if args.out is not None else Path("reports") / "explore" / f"{args.ref}.html"
@@ -77,21 +69,16 @@ def handle(args: argparse.Namespace) -> int:
         raise CliError(f"--out {str(out)!r}: give a file name ending in .html")
     client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
     try:
-        try:
-            grid_id, parent = find_grid_run(client, args.ref, args.experiment)
-        except GridNotFoundError as no_grid:
-            try:
-                trials, log_to = [trial_run(client, args.ref)], args.ref
-            except ExploreError as exc:
-                raise ExploreError(f"{exc} ({no_grid})") from exc
-            title = f"linkevo explorer: {trials[0].trial_key} (run {args.ref})"
-            drawn = args.drawn
-        else:
-            trials, log_to = grid_trials(client, grid_id, args.experiment), parent
-            title = f"linkevo explorer: grid {grid_id} ({len(trials)} repertoire trials)"
-            drawn = args.drawn if args.drawn is not None else GRID_DRAWN
+        trials, grid_id, parent = resolve_repertoires(client, args.ref, args.experiment)
     except ExploreError as exc:
         raise CliError(str(exc)) from exc
+    if parent is None:
+        log_to, drawn = args.ref, args.drawn
+        title = f"linkevo explorer: {trials[0].trial_key} (run {args.ref})"
+    else:
+        log_to = parent
+        drawn = args.drawn if args.drawn is not None else GRID_DRAWN
+        title = f"linkevo explorer: grid {grid_id} ({len(trials)} repertoire trials)"
     out.parent.mkdir(parents=True, exist_ok=True)
     os.environ["MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR"] = "false"  # one line per trial instead
 

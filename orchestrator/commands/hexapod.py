@@ -33,7 +33,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = parser.add_subparsers(dest="hexapod_command", required=True, metavar="ACTION")
 
     walk = sub.add_parser("walk", help="walk for a fixed time with the phase-locked tripod gait")
-    _robot_options(walk)
+    walk.add_argument(
+        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
+    )
+    walk.add_argument(
+        "--simulate",
+        nargs="?",
+        const="bus",
+        default=None,
+        help="run against the built-in bus emulator on a pty: 'bus' (the default when given; "
+        "the motors turn as commanded) or 'physics' (the motors are the cranks of the robot "
+        "simulated in MuJoCo, walking --linkage on --floor, in real time)",
+    )
+    walk.add_argument(
+        "--linkage", default=None, help="with --simulate physics: RUN_ID[:CELL] or FILE.json"
+    )
+    walk.add_argument("--floor", default="flat", help="with --simulate physics: flat or carpet")
     walk.add_argument("--seconds", type=float, required=True, help="walking time in seconds")
     walk.add_argument("--telemetry", type=Path, default=None, help="CSV file, one row per tick")
     walk.set_defaults(func=walk_handler)
@@ -74,6 +89,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     simulate.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
     simulate.add_argument("--repeats", type=int, default=5, help="walks on this floor")
     simulate.add_argument("--robot", default="first", help="first or modified (the table's row)")
+    simulate.add_argument(
+        "--model",
+        default="lean",
+        help="lean (legs reduced to what meets the floor; the default) or full (every beam a "
+        "body; slower, for pictures)",
+    )
     simulate.add_argument("--seed", type=int, default=0, help="seeds the start's perturbation")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument(
@@ -104,6 +125,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     study.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
     study.add_argument("--repeats", type=int, default=5, help="walks per robot and floor")
     study.add_argument("--out", type=Path, default=None, help="write the table here as CSV")
+    study.add_argument("--model", default="lean", help="lean (the default) or full")
     study.add_argument(
         "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
     )
@@ -171,9 +193,17 @@ def walk_handler(args: argparse.Namespace) -> int:
     from linkevo.hardware.session import run_walk
 
     config = load_robot(args)
+    physics = _physics_world(args, config)
     show_motor_stops()
+    start = None if physics is None else physics.body()
     try:
-        result = run_walk(config, args.seconds, telemetry=args.telemetry, simulate=args.simulate)
+        result = run_walk(
+            config,
+            args.seconds,
+            telemetry=args.telemetry,
+            simulate=args.simulate is not None,
+            physics=physics,
+        )
     except ShutdownIncomplete as exc:
         ended = f" after: {exc.__cause__}" if exc.__cause__ is not None else ""
         print(f"linkevo hexapod walk: {exc}{ended}; cut the motor power", file=sys.stderr)
@@ -191,9 +221,47 @@ def walk_handler(args: argparse.Namespace) -> int:
         f"watchdog re-arms {result.watchdog_rearms}, "
         f"max phase error {math.degrees(result.max_phase_error_rad):.1f}°"
     )
+    if physics is not None:
+        moved = (physics.body() - start) * 100
+        print(
+            f"the simulated robot moved {moved[0]:.1f} cm along its length, "
+            f"{moved[1]:.1f} cm across"
+        )
     if args.telemetry is not None:
         print(f"telemetry: {args.telemetry}")
     return 0
+
+
+def _physics_world(args: argparse.Namespace, config):
+    """Returns the simulated robot `--simulate physics` drives, or None for the plain
+    emulator or the real robot.
+
+    Raises:
+        CliError: a bad --simulate, --floor or --linkage, before anything starts.
+    """
+    if args.simulate not in (None, "bus", "physics"):
+        raise CliError(f"--simulate {args.simulate!r}: allowed bus, physics")
+    if args.simulate != "physics":
+        if args.linkage is not None:
+            raise CliError("--linkage is used with --simulate physics only")
+        return None
+    from linkevo.hardware.physics_bus import PhysicsWorld
+    from linkevo.orchestrator.commands.hexapod_simulate import simulation_source
+    from linkevo.sim.leg import LegError, leg_from_genome
+    from linkevo.sim.linkage_doc import from_document
+    from linkevo.sim.robot import FLOORS
+
+    if args.floor not in FLOORS:
+        raise CliError(f"--floor {args.floor!r}: allowed {', '.join(FLOORS)}")
+    if args.linkage is None:
+        raise CliError("--simulate physics needs --linkage RUN_ID[:CELL] or FILE.json")
+    args.no_log, args.experiment, args.tracking_uri = True, "linkevo", None
+    _, source = simulation_source(args)
+    try:
+        leg = leg_from_genome(*from_document(source.document))
+        return PhysicsWorld(config, leg, FLOORS[args.floor])
+    except (LegError, ValueError) as exc:
+        raise CliError(str(exc)) from exc
 
 
 def _ask_distance(repeat: int) -> float:

@@ -26,6 +26,7 @@ def simulate_handler(args: argparse.Namespace) -> int:
     from linkevo.hardware.field_trial import ROBOTS
     from linkevo.orchestrator.simulate import log_simulated, simulate_source, write_pictures
     from linkevo.sim.robot import FLOORS
+    from linkevo.sim.walk import MODELS
 
     if args.floor not in FLOORS:
         raise CliError(f"--floor {args.floor!r}: allowed {', '.join(FLOORS)}")
@@ -33,12 +34,14 @@ def simulate_handler(args: argparse.Namespace) -> int:
         raise CliError(f"--seconds {args.seconds}: allowed a number in (0, {MAX_SIM_SECONDS:g}]")
     if not 1 <= args.repeats <= MAX_REPEATS:
         raise CliError(f"--repeats {args.repeats}: allowed an integer in [1, {MAX_REPEATS}]")
+    if args.model not in MODELS:
+        raise CliError(f"--model {args.model!r}: allowed {', '.join(MODELS)}")
     if args.robot not in ROBOTS:
         raise CliError(f"--robot {args.robot!r}: allowed {', '.join(ROBOTS)}")
     if args.seed < 0:
         raise CliError(f"--seed {args.seed}: allowed an integer >= 0")
     config = load_robot(args)
-    uri, source = _simulation_source(args)
+    uri, source = simulation_source(args)
     try:
         result, walks = simulate_source(
             source,
@@ -47,6 +50,7 @@ def simulate_handler(args: argparse.Namespace) -> int:
             seconds=args.seconds,
             repeats=args.repeats,
             seed=args.seed,
+            model=args.model,
         )
     except ValueError as exc:
         raise CliError(str(exc)) from exc
@@ -66,7 +70,7 @@ def simulate_handler(args: argparse.Namespace) -> int:
     return 0
 
 
-def _simulation_source(args: argparse.Namespace):
+def simulation_source(args: argparse.Namespace):
     """Returns (tracking URI, the source linkage) of `--linkage`."""
     from mlflow.tracking import MlflowClient
 
@@ -94,7 +98,10 @@ def _simulation_source(args: argparse.Namespace):
 def _simulation_text(source, robot: str, result: dict) -> str:
     """The simulated trial as a few lines a builder reads."""
     head = f"{source.approach} {robot} robot on the {result['floor']} floor"
-    lines = [f"{head} ({result['seconds']:g} s per walk, {result.get('leg', 'no leg')}):"]
+    lines = [
+        f"{head} ({result['seconds']:g} s per walk, {result.get('leg', 'no leg')}, "
+        f"{result.get('model', 'lean')} model):"
+    ]
     if result["distance_cm"]:
         walked = ", ".join("–" if d is None else f"{d:.1f}" for d in result["distance_cm"])
         lines.append(
@@ -137,6 +144,10 @@ def study_handler(args: argparse.Namespace) -> int:
         raise CliError(f"--repeats {args.repeats}: allowed an integer in [1, {MAX_REPEATS}]")
     if args.out is not None and args.out.suffix != ".csv":
         raise CliError(f"--out {args.out}: allowed a .csv file")
+    from linkevo.sim.walk import MODELS
+
+    if args.model not in MODELS:
+        raise CliError(f"--model {args.model!r}: allowed {', '.join(MODELS)}")
     config = load_robot(args)
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:
@@ -148,6 +159,7 @@ def study_handler(args: argparse.Namespace) -> int:
             config=config,
             seconds=args.seconds,
             repeats=args.repeats,
+            model=args.model,
         )
     except ValueError as exc:
         raise CliError(str(exc)) from exc

@@ -151,7 +151,7 @@ def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo pull`."""
     from mlflow.tracking import MlflowClient
 
-    from linkevo.orchestrator.pull import pull
+    from linkevo.orchestrator.pull import predicted_walks, pull, walk_line
     from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
@@ -184,7 +184,10 @@ def handle(args: argparse.Namespace) -> int:
     cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
     print(f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
           file=sys.stderr)  # fmt: skip
-    for path in pull(source, args.out or Path("pulled"), gif=args.gif):
+    walks = predicted_walks(client, source)
+    if walks:
+        print(f"predicted walk: {walk_line(walks)}", file=sys.stderr)
+    for path in pull(source, args.out or Path("pulled"), gif=args.gif, walks=walks):
         print(path)
     return 0
 

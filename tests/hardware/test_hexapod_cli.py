@@ -48,6 +48,24 @@ def test_simulated_three_second_walk_accounts_for_every_50_hz_slot(config_file, 
     assert not list(telemetry.parent.glob(".walk.csv.*"))
 
 
+def test_simulate_physics_walks_a_linkage_document_and_refuses_bad_input(config_file, capsys):
+    cfg = config_file("/dev/unused")
+    linkage = Path(__file__).parents[2] / "benchmarks" / "walk_linkage.json"
+    base = ["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--simulate", "physics"]
+    assert main([*base, "--linkage", str(linkage), "--floor", "carpet"]) == 0
+    moved = re.search(r"the simulated robot moved (-?[\d.]+) cm along", capsys.readouterr().out)
+    assert moved and float(moved.group(1)) > 2.0
+    for extra, message in (
+        ([], "--simulate physics needs --linkage"),
+        (["--linkage", str(linkage), "--floor", "ice"], "--floor 'ice': allowed flat, carpet"),
+    ):
+        assert main([*base, *extra]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--simulate",
+                 "gazebo"]) == 2  # fmt: skip
+    assert "--simulate 'gazebo': allowed bus, physics" in capsys.readouterr().err
+
+
 def test_sigint_to_a_walking_process_leaves_motors_stopped(emulator, config_file):
     emu = emulator()
     cfg = config_file(emu.port)

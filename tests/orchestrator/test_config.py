@@ -97,3 +97,14 @@ def test_identity_leaves_out_how_and_where_a_grid_runs():
 
 def test_flatten_turns_tables_into_dotted_params():
     assert config.flatten({"a": 1, "options": {"b": [1, 2]}}) == {"a": "1", "options.b": "[1, 2]"}
+
+
+def test_walk_rerank_is_part_of_the_grid_only_when_on():
+    plain = GridConfig()
+    assert "walk_rerank" not in plain.identity()
+    assert GridConfig(walk_rerank=0).identity() == plain.identity()
+    assert GridConfig(walk_rerank=20).identity() == {**plain.identity(), "walk_rerank": 20}
+    with pytest.raises(ConfigError, match="config key 'walk_rerank' = -1 is invalid"):
+        GridConfig(walk_rerank=-1)
+    with pytest.raises(ConfigError, match="allowed: 0 to 1000"):
+        GridConfig(walk_rerank=5000)

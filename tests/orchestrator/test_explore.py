@@ -8,7 +8,6 @@ import gzip
 import json
 import re
 import time
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -20,13 +19,11 @@ from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.explore import TrialRun, repertoire_view
 from linkevo.sim import decode, simulate
 from linkevo.sim.physical import physical_checks
-from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.store.linkages import repertoire
-from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.tracking import ensure_experiment
-from linkevo.workers.trial import TrialSpec, run_trial
-from linkevo.workers.trial_task import SPEC_PARAMS
+from linkevo.workers.trial import TrialSpec
 from tests.helpers.browser import chromium
+from tests.helpers.trials import record_trials
 
 GRID = "e0e0e0e0e0e0"
 
@@ -35,25 +32,11 @@ GRID = "e0e0e0e0e0e0"
 def store(tmp_path_factory):
     """A real sqlite store with a grid of three real trials (MAP-ST, MAP-LIS, EA), each
     run by the trial loop and recorded by the MLflow recorder as a grid records them."""
-    root = tmp_path_factory.mktemp("explore")
-    uri = f"sqlite:///{root / 'mlflow.db'}"
-    experiment = ensure_experiment(uri)
-    client = MlflowClient(uri)
-    client.create_run(experiment, tags={"grid_id": GRID, "linkevo.kind": "grid"})
-    runs = {}
-    for index, approach in enumerate(("MAP-ST", "MAP-LIS", "EA")):
-        spec = TrialSpec(approach, "Fp", evaluations=3000, batch_size=1000, seed=index)
-        key = f"{approach}/Fp/00"
-        tags = {"grid_id": GRID, "linkevo.kind": "trial", "approach": approach,
-                "fitness": "Fp", "trial_key": key, "trial_index": "0"}  # fmt: skip
-        run_id = client.create_run(experiment, run_name=key, tags=tags).info.run_id
-        values = asdict(spec)
-        client.log_batch(run_id, params=[Param(k, str(values[k])) for k in SPEC_PARAMS])
-        evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
-        run_trial(spec, evaluator, MlflowRecorder(client, run_id), root / key.replace("/", "_"))
-        client.set_terminated(run_id)
-        runs[approach] = run_id
-    return uri, runs
+    specs = [
+        TrialSpec(approach, "Fp", evaluations=3000, batch_size=1000, seed=index)
+        for index, approach in enumerate(("MAP-ST", "MAP-LIS", "EA"))
+    ]
+    return record_trials(tmp_path_factory.mktemp("explore"), GRID, specs)
 
 
 def _view(uri: str, run_id: str, approach: str, tmp_path: Path, drawn=None) -> tuple:

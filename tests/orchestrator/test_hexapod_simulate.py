@@ -87,8 +87,10 @@ def test_simulate_prints_the_table_one_json_and_logs_a_simulated_field_trial(sto
     for key in ("heading_drift_deg", "breaks", "reason", "torque_p95_of_stall", "pin_force_p99_n",
                 "loop_error_max_mm", "body_height_cm", "foot_slip_mm_s"):  # fmt: skip
         assert key in result
+    assert result["model"] == "lean"
     run = MlflowClient(uri).get_run(result["run_id"])
     assert run.data.params["simulated"] == "physics"
+    assert run.data.params["model"] == "lean"
     assert run.data.tags["linkevo.kind"] == "field_trial"
     assert run.data.tags["source_run_id"] == run_id
     history = MlflowClient(uri).get_metric_history(result["run_id"], "distance_cm")
@@ -107,11 +109,11 @@ def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_pat
     out = tmp_path / "pics"
     code = main(
         ["hexapod", "simulate", "--linkage", str(doc), "--floor", "flat", "--seconds", "1",
-         "--repeats", "1", "--no-log", "--out", str(out)]
+         "--repeats", "1", "--no-log", "--out", str(out), "--model", "full"]
     )  # fmt: skip
     assert code == 0
     text = capsys.readouterr().out
-    assert "flat floor" in text and "distance" in text
+    assert "flat floor" in text and "distance" in text and "full model" in text
     for name in ("walk.gif", "walk.png", "path.png", "contacts.png"):
         assert (out / name).stat().st_size > 1000
 
@@ -124,6 +126,7 @@ def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_pat
         (["--floor", "flat", "--seconds", "nan"], "--seconds nan"),
         (["--floor", "flat", "--repeats", "0"], "--repeats 0: allowed an integer in [1, 100]"),
         (["--floor", "flat", "--robot", "third"], "--robot 'third': allowed first, modified"),
+        (["--floor", "flat", "--model", "cad"], "--model 'cad': allowed lean, full"),
     ],
 )
 def test_simulate_refuses_bad_input_before_any_work(store, args, message, capsys):

@@ -5,13 +5,15 @@ from __future__ import annotations
 
 import dataclasses
 
+import mujoco
 import numpy as np
 import pytest
 
 from linkevo.sim.evaluate import evaluate
 from linkevo.sim.genome import random_genomes
+from linkevo.sim.lean_model import build_lean_robot
 from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.robot import FLOORS, Frame, Motor
+from linkevo.sim.robot import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG, Frame, Motor
 from linkevo.sim.walk import LOOP_ERROR_BOUND_MM, WalkSettings, walk
 from tests.helpers.walking import crank_leg, jansen_leg
 
@@ -57,12 +59,50 @@ def test_the_same_seed_gives_the_same_distance_and_another_seed_another(evolved)
     assert other.distance_m != first.distance_m
 
 
+@pytest.mark.parametrize("model", ["lean", "full"])
 @pytest.mark.parametrize("floor", ["flat", "carpet"])
-def test_loops_stay_closed_and_no_walk_beats_the_no_slip_bound(jansen, evolved, floor):
+def test_loops_stay_closed_and_no_walk_beats_the_no_slip_bound(jansen, evolved, floor, model):
     for leg in (jansen, evolved):
-        w = walk(leg, FLOORS[floor], settings=SHORT)
+        w = walk(leg, FLOORS[floor], settings=dataclasses.replace(SHORT, model=model))
         assert 0 < w.loop_error_mm < LOOP_ERROR_BOUND_MM
         assert 0 < w.distance_m <= w.bound_m
+
+
+@pytest.mark.parametrize("floor", ["flat", "carpet"])
+def test_the_lean_model_walks_as_the_full_one(jansen, evolved, floor):
+    """The lean model (legs reduced to the parts that meet the floor) against the full one
+    (every beam a body): distance within 10 %, the builder's loads within 25 %."""
+    for leg in (jansen, evolved):
+        lean = walk(leg, FLOORS[floor], settings=SHORT)
+        full = walk(leg, FLOORS[floor], settings=dataclasses.replace(SHORT, model="full"))
+        assert abs(lean.distance_m - full.distance_m) < 0.1 * abs(full.distance_m)
+        assert abs(lean.pin_force_n[2] - full.pin_force_n[2]) < 0.25 * full.pin_force_n[2]
+        assert abs(lean.torque_p95 - full.torque_p95) < 0.25 * full.torque_p95
+        assert lean.breaks == full.breaks
+
+
+def test_the_lean_pin_statics_balance_the_motor_as_the_physics_does(evolved):
+    """The motor torque the statics of the massless leg needs under the couplings' forces is
+    the torque those couplings put on the crank in MuJoCo (to the poses' 1° rounding)."""
+    phases = {s: np.radians(TRIPOD_OFFSETS_DEG[s]) for s in LEG_SLOTS}
+    legs = dict.fromkeys(LEG_SLOTS, evolved)
+    robot = build_lean_robot(legs, phases, FLOORS["carpet"], frame=Frame(mass_kg=5.0))
+    model, coupling = robot.model, robot.coupling
+    data = mujoco.MjData(model)
+    data.ctrl[:] = 2.6  # rad/s, about the gait's speed
+    statics, facing = coupling.statics[0], evolved.facing()
+    torques, balanced = [], []
+    for tick in range(100):
+        coupling.update(model, data)
+        mujoco.mj_step(model, data, nstep=10)
+        if tick % 10 == 9:
+            forces = data.efc_force[: len(coupling.equalities)][coupling.leg == 0]
+            wrench = forces.reshape(1, -1, 3) * np.array([-facing, 1.0, 1.0])
+            torques.append(statics.solve(coupling.poses(data)[:1], wrench)[1][0])
+            balanced.append(-data.qfrc_constraint[robot.crank_dof[0]])
+    torques, balanced = np.array(torques), np.array(balanced)
+    assert np.abs(balanced).max() > 0.05  # N·m: the legs carry a 5 kg frame
+    assert np.abs(torques - balanced).max() < 0.05 * np.abs(balanced).max()
 
 
 def test_a_grippy_floor_cannot_push_a_walk_past_the_bound(evolved):

@@ -329,3 +329,29 @@ def test_resume_without_a_checkpoint_deletes_nothing_it_did_not_write(tmp_path: 
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path, resume=True)
     assert own.read_bytes() == b"the user's copy" and (tmp_path / "notes.txt").is_file()
     assert (tmp_path / "checkpoint" / "state.npz").is_file()
+
+
+def test_walk_rerank_walks_the_best_linkages_and_keeps_the_furthest(tmp_path: Path) -> None:
+    """`walk_rerank`: the K lowest-loss linkages that pass the physical checks are walked
+    on the simulated robot; the furthest one that does not break is the best walker."""
+    spec = TrialSpec("MAP-LIS", "Fp", evaluations=6000, batch_size=1000, seed=1, walk_rerank=3)
+    evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
+    logged: list[dict] = []
+
+    class Recorder(NullRecorder):
+        def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
+            logged.append(metrics)
+
+    result = run_trial(spec, evaluator, Recorder(), tmp_path)
+    walks = pd.read_parquet(tmp_path / "walk_rerank.parquet")
+    assert len(walks) == 3 and (walks["floor"] == "flat").all()
+    assert list(walks["loss"]) == sorted(walks["loss"])
+    sound = walks[(walks["status"] == "walked") & ~walks["breaks"]]
+    assert len(sound) >= 1
+    best = sound.loc[sound["mean_distance_cm"].idxmax()]
+    assert result.metrics["best_walk_cm"] == pytest.approx(best["mean_distance_cm"])
+    assert logged[-1] == {"best_walk_cm": result.metrics["best_walk_cm"]}
+    document = json.loads((tmp_path / "best_walker.json").read_text())
+    assert document["meta"]["cell"] == best["cell"]
+    genome, _ = from_document(document)
+    assert np.array_equal(genome, best["genome"])

@@ -78,6 +78,15 @@ def space_of(approach: str, dims: int) -> DescriptorSpace:
     return DescriptorSpace(tuple(f"d{i}" for i in range(dims)), side, (1.0,) * dims)
 
 
+def axis_names(space: DescriptorSpace) -> tuple[str, str]:
+    """Returns the (x, y) axis names of a folded map as `fold_bins` places the bins: the
+    second descriptor along x, the first up y; on a 4-D map outer › inner on each axis."""
+    names = space.names
+    if space.dims == 2:
+        return names[1], names[0]
+    return f"{names[1]} › {names[3]}", f"{names[0]} › {names[2]}"
+
+
 def bin_columns(columns: pd.Index | list[str]) -> list[str]:
     """Returns the archive's bin columns bin_0, bin_1, ... in order."""
     found = [c for c in columns if c.startswith("bin_")]
@@ -179,11 +188,7 @@ def draw_trial_maps(view: dict[str, np.ndarray], approach: str, path: Path) -> N
         shown = heat.imshow(image, origin="lower", cmap=LOSS_CMAP, norm=norm)
         heat.set_title(f"{approach}: best loss per cell ({len(archive)} filled)", fontsize=8)
         heat.tick_params(labelsize=6)
-        names = space.names  # as fold_bins places them: outer › inner bins on each axis
-        x_axis, y_axis = (
-            (names[1], names[0]) if space.dims == 2
-            else (f"{names[1]} › {names[3]}", f"{names[0]} › {names[2]}")
-        )  # fmt: skip
+        x_axis, y_axis = axis_names(space)
         heat.set_xlabel(f"{x_axis} (bin)", fontsize=6)
         heat.set_ylabel(f"{y_axis} (bin)", fontsize=6)
         colour_bar = fig.colorbar(shown, cax=bar, extend="max")

@@ -111,6 +111,17 @@ def repertoire(client: MlflowClient, run_id: str, tmp: Path):
     return pd.read_parquet(_download(client, run_id, layout.REPERTOIRE, tmp))
 
 
+def walk_map(client: MlflowClient, run_id: str, tmp: Path):
+    """Returns the run's walk map (`linkevo walkmap`) as a pandas table, or None when it
+    has none."""
+    import pandas as pd
+
+    try:
+        return pd.read_parquet(_download(client, run_id, layout.WALK_MAP, tmp))
+    except LinkageError:
+        return None
+
+
 def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:
     """Returns (flat cell, genome (56,)) of the repertoire row a cell reference names."""
     bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))

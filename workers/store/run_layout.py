@@ -50,6 +50,14 @@ BEST_JSON = "best_linkage.json"
 """A trial's best linkage, as `sim.linkage_doc` writes it."""
 REPERTOIRE = "repertoire.parquet"
 POPULATION = "population.parquet"
+WALK_MAP = "walkmap.parquet"
+"""A repertoire trial's walk map: a row per walked cell and floor (`sim.walk_map.COLUMNS`
+plus the cell's bins), logged by `linkevo walkmap`."""
+WALK_MAP_PNG = "walkmap.png"
+WALK_RERANK = "walk_rerank.parquet"
+"""A trial's re-ranking walks (grid key `walk_rerank`): its K best linkages walked."""
+BEST_WALKER = "best_walker.json"
+"""Of those, the furthest walker that does not break, as `sim.linkage_doc` writes it."""
 
 ID_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,63}")
 """What a run id or grid id may hold, typed or read back from a store (a grid id is 12 hex

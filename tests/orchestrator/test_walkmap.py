@@ -1,0 +1,221 @@
+"""`linkevo walkmap` on a real store, a real local Ray instance and the real engine: the walk
+map logged to the trial's run, `--resume`, bad input, and the explorer's walking layer in a
+real headless Chromium."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from mlflow.tracking import MlflowClient
+
+from linkevo.orchestrator.cli import main
+from linkevo.orchestrator.explore import trial_run
+from linkevo.orchestrator.walkmap import Selection, run_in_process, walk_map
+from linkevo.workers.store.linkages import repertoire
+from linkevo.workers.trial import TrialSpec
+from tests.helpers.browser import chromium
+from tests.helpers.trials import record_trials
+
+GRID = "0a0b0c0d0e0f"
+SECONDS = "2"
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """A real sqlite store with real MAP-LIS, MAP-WH and EA trials of a grid, run by the
+    trial loop and recorded as a grid records them."""
+    specs = [
+        TrialSpec(approach, "Fp", evaluations=4000, batch_size=1000, seed=3)
+        for approach in ("MAP-LIS", "MAP-WH", "EA")
+    ]
+    return record_trials(tmp_path_factory.mktemp("walkmap"), GRID, specs)
+
+
+def _walk_map(uri: str, run_id: str, tmp: Path) -> pd.DataFrame:
+    path = MlflowClient(uri).download_artifacts(run_id, "walkmap.parquet", str(tmp))
+    return pd.read_parquet(path)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--floor", "ice"], "--floor 'ice': allowed flat, carpet, both"),
+        (["--cells", "best:0"], "--cells 'best:0': allowed buildable, all, best:K"),
+        (["--cells", "most"], "--cells 'most'"),
+        (["--seconds", "0"], "--seconds 0.0: allowed a number in (0, 600]"),
+    ],
+)
+def test_bad_input_is_refused_before_any_work(store, args, message, capsys):
+    uri, runs = store
+    assert main(["walkmap", runs["MAP-LIS"], "--tracking-uri", uri, *args]) == 2
+    assert message in capsys.readouterr().err
+    names = [a.path for a in MlflowClient(uri).list_artifacts(runs["MAP-LIS"])]
+    assert "walkmap.parquet" not in names
+
+
+def test_a_population_trial_has_no_map_to_walk(store, capsys):
+    uri, runs = store
+    assert main(["walkmap", runs["EA"], "--tracking-uri", uri]) == 2
+    assert "keeps a population, not a repertoire" in capsys.readouterr().err
+
+
+def test_walkmap_walks_the_chosen_cells_on_both_floors_and_logs_the_map(
+    store, ray_local, tmp_path, capsys
+):
+    uri, runs = store
+    run_id = runs["MAP-LIS"]
+    code = main(["walkmap", run_id, "--cells", "best:4", "--seconds", SECONDS,
+                 "--tracking-uri", uri])  # fmt: skip
+    assert code == 0
+    printed = capsys.readouterr().out
+    frame = _walk_map(uri, run_id, tmp_path)
+    client = MlflowClient(uri)
+    trial = trial_run(client, run_id)
+    table = repertoire(client, run_id, tmp_path / "rep")
+    expected = Selection.parse("best:4").choose(table, trial.mode)["cell"].tolist()
+    assert sorted(frame["cell"].unique()) == sorted(expected)
+    assert len(frame) == 8 and set(frame["floor"]) == {"flat", "carpet"}
+    assert {"bin_0", "bin_1", "mean_distance_cm", "breaks", "reason"} <= set(frame.columns)
+    walked = frame[frame["status"] == "walked"]
+    assert len(walked) >= 2 and np.isfinite(walked["mean_distance_cm"]).all()
+    names = [a.path for a in client.list_artifacts(run_id)]
+    assert "walkmap.png" in names
+    for floor in ("flat", "carpet"):
+        sound = walked[(walked["floor"] == floor) & ~walked["breaks"]]
+        if len(sound):
+            best = client.get_run(run_id).data.metrics[f"walk_best_cm_{floor}"]
+            assert best == pytest.approx(sound["mean_distance_cm"].max())
+            assert f"  {floor}: " in printed
+
+
+def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
+    store, ray_local, tmp_path, capsys
+):
+    uri, runs = store
+    run_id = runs["MAP-LIS"]
+    before = _walk_map(uri, run_id, tmp_path / "before")
+    assert main(["walkmap", run_id, "--cells", "best:6", "--tracking-uri", uri]) == 2
+    assert "already has a walk map; add --resume" in capsys.readouterr().err
+
+    client = MlflowClient(uri)
+    walked_now: list[int] = []
+
+    def counted(batches):
+        walked_now.extend(int(c) for b in batches for c in b.cells)
+        return run_in_process(batches)
+
+    after = walk_map(
+        client, trial_run(client, run_id), counted, floors=("flat", "carpet"),
+        selection=Selection.parse("best:6"), resume=True, seconds=float(SECONDS),
+    )  # fmt: skip
+    assert len(walked_now) == 2 and not set(walked_now) & set(before["cell"])
+    assert len(after) == 12
+    old = after[after["cell"].isin(before["cell"])].sort_values(["floor", "cell"])
+    pd.testing.assert_frame_equal(
+        old.reset_index(drop=True)[list(before.columns)],
+        before.sort_values(["floor", "cell"]).reset_index(drop=True),
+    )
+    assert len(_walk_map(uri, run_id, tmp_path / "after")) == 12
+
+
+def test_the_explorer_colours_by_distance_and_filters_on_walking(store, ray_local, tmp_path):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    uri, runs = store
+    run_id = runs["MAP-LIS"]
+    frame = _walk_map(uri, run_id, tmp_path)
+    if frame.empty:  # the walk map of the test above
+        pytest.fail("no walk map")
+    out = tmp_path / "page.html"
+    assert main(["explore", run_id, "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
+    walked = frame[(frame["status"] == "walked") & (frame["floor"] == "flat")]
+    cell = int(walked.sort_values("mean_distance_cm").iloc[-1]["cell"])
+    distance = float(walked.set_index("cell").loc[cell, "mean_distance_cm"])
+    with chromium() as browser:
+        browser.get(out.resolve().as_uri())
+        deadline = time.monotonic() + 20
+        while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
+            assert time.monotonic() < deadline, "the explorer page did not load its data"
+            time.sleep(0.05)
+        assert browser.find_element(By.ID, "walking").is_displayed()
+        colour = Select(browser.find_element(By.ID, "colour-by"))
+        assert [o.text for o in colour.options] == ["loss", "distance, flat", "distance, carpet"]
+        colour.select_by_visible_text("distance, flat")
+        assert "distance on flat" in browser.find_element(By.ID, "legend").text
+
+        where = browser.execute_script("return window.explorer.cellCenter(arguments[0])", cell)
+        canvas = browser.find_element(By.ID, "map")
+        size = canvas.size
+        ActionChains(browser).move_to_element_with_offset(
+            canvas, round(where["x"] - size["width"] / 2), round(where["y"] - size["height"] / 2)
+        ).perform()
+        hovered = browser.find_element(By.ID, "hover-info").text
+        assert f"cell {cell}:" in hovered
+        assert f"flat: {distance:.1f} cm" in hovered
+
+        least = float(np.median(walked["mean_distance_cm"]))
+        browser.find_element(By.ID, "f-walk").send_keys(f"{least:.1f}")
+        expected = int((walked["mean_distance_cm"].round(1) >= round(least, 1)).sum())
+        total = browser.execute_script("return window.explorer.view().cells.length")
+        passing = browser.find_element(By.ID, "passing").text
+        assert passing == f"{expected} of {total} cells pass the filters"
+        browser.find_element(By.ID, "f-sound").click()
+        sound = int(
+            ((walked["mean_distance_cm"].round(1) >= round(least, 1)) & ~walked["breaks"]).sum()
+        )
+        assert browser.find_element(By.ID, "passing").text.startswith(f"{sound} of ")
+
+
+def test_pull_prints_and_writes_a_walked_cells_predicted_walks(store, ray_local, tmp_path, capsys):
+    import json
+
+    uri, runs = store
+    run_id = runs["MAP-LIS"]
+    frame = _walk_map(uri, run_id, tmp_path / "map")
+    walked = frame[(frame["status"] == "walked") & (frame["floor"] == "flat")].iloc[0]
+    cell = int(walked["cell"])
+    out = tmp_path / "pulled"
+    assert main(["pull", f"{run_id}:{cell}", "--out", str(out), "--tracking-uri", uri]) == 0
+    printed = capsys.readouterr().err
+    assert f"predicted walk: flat {walked['mean_distance_cm']:.1f} cm in 2 s" in printed
+    document = json.loads((out / "linkage.json").read_text())
+    assert document["predicted_walk"]["flat"]["distance_cm"] == round(walked["mean_distance_cm"], 1)
+    assert "Predicted walk: flat" in (out / "build_sheet.md").read_text()
+
+
+def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_local, tmp_path):
+    import re
+    import select
+    import signal
+    import subprocess
+    import sys
+
+    uri, runs = store
+    run_id = runs["MAP-WH"]
+    linkevo = Path(sys.executable).parent / "linkevo"
+    args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "1", "--floor", "flat",
+            "--tracking-uri", uri]  # fmt: skip
+    proc = subprocess.Popen([str(linkevo), *args], stderr=subprocess.PIPE)
+    seen, deadline = b"", time.monotonic() + 120
+    while not re.search(rb"\| ([4-9]|\d\d)/30 ", seen):  # a few walks done
+        assert time.monotonic() < deadline and proc.poll() is None, seen.decode()[-500:]
+        if select.select([proc.stderr], [], [], 0.5)[0]:
+            seen += proc.stderr.read1(4096)
+    proc.send_signal(signal.SIGINT)
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130
+    assert f"linkevo walkmap {run_id} --resume" in (seen + rest).decode()
+    partial = _walk_map(uri, run_id, tmp_path / "partial")
+    assert 4 <= len(partial) < 30
+
+    assert main([*args, "--resume"]) == 0
+    complete = _walk_map(uri, run_id, tmp_path / "complete")
+    assert len(complete) == 30 and complete["cell"].is_unique
+    kept = complete.set_index("cell").loc[partial["cell"], "mean_distance_cm"].to_numpy()
+    assert np.array_equal(kept, partial["mean_distance_cm"].to_numpy(), equal_nan=True)
