@@ -34,8 +34,8 @@ def draw_walk_map(frame: pd.DataFrame, trial, path: Path) -> Path:
     walked = frame[frame["status"] == "walked"]
     top = walked.loc[~walked["breaks"], "mean_distance_cm"]
     high = max(float(np.nanquantile(top, 0.98)), 1.0) if top.notna().any() else 1.0
-    fig = Figure(figsize=(4.2 * len(floors) + 0.8, 4.2))
-    width = 0.8 / len(floors)
+    fig = Figure(figsize=(4.0 * len(floors) + 0.8, 4.2))
+    width = 0.84 / len(floors)
     shown = None
     for k, floor in enumerate(floors):
         ax = fig.add_axes((0.06 + k * (width + 0.02), 0.12, width - 0.04, 0.76))
@@ -54,8 +54,10 @@ def draw_walk_map(frame: pd.DataFrame, trial, path: Path) -> Path:
         ax.set_ylabel(f"{y_axis} (bin)", fontsize=6)
         ax.tick_params(labelsize=6)
     bar = fig.add_axes((0.9, 0.18, 0.015, 0.64))
-    colour_bar = fig.colorbar(shown, cax=bar, extend="max")
-    colour_bar.set_label("distance in 10 s, cm (brighter is further)", fontsize=6)
+    colour_bar = fig.colorbar(shown, cax=bar, extend="both")
+    colour_bar.set_label(
+        "distance in 10 s, cm (brighter is further; backwards is darkest)", fontsize=6
+    )
     colour_bar.ax.tick_params(labelsize=6)
     fig.suptitle(f"{trial.trial_key}: walk map (simulated robot, one walk per cell)", fontsize=9)
     with atomic_path(path) as tmp:
