@@ -141,6 +141,19 @@ def run_on_ray(batches: list[CellBatch], in_flight: int) -> Iterator[list[dict]]
             ray.cancel(ref, force=True)
 
 
+def refuse_overwrite(client, trial: TrialRun, resume: bool) -> None:
+    """Raises WalkMapError when the trial's run has a walk map and `resume` is off, so
+    nothing is overwritten unasked."""
+    if resume:
+        return
+    names = {a.path for a in client.list_artifacts(trial.run_id)}
+    if layout.WALK_MAP in names:
+        raise WalkMapError(
+            f"run {trial.run_id} ({trial.trial_key}) already has a walk map; add --resume "
+            "to walk only the cells it lacks"
+        )
+
+
 def walk_map(
     client,
     trial: TrialRun,
@@ -167,14 +180,10 @@ def walk_map(
     from linkevo.workers.store.linkages import repertoire
     from linkevo.workers.store.linkages import walk_map as stored_map
 
+    refuse_overwrite(client, trial, resume)
     with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
         table = repertoire(client, trial.run_id, Path(tmp) / "in")
         done = stored_map(client, trial.run_id, Path(tmp) / "done")
-        if done is not None and not resume:
-            raise WalkMapError(
-                f"run {trial.run_id} ({trial.trial_key}) already has a walk map; add --resume "
-                "to walk only the cells it lacks"
-            )
         chosen = selection.choose(table, trial.mode)
         batches = plan(
             chosen, trial.mode, floors, done, as_evolved=selection.kind == "all", seconds=seconds

@@ -58,7 +58,13 @@ def handle(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from linkevo.orchestrator.explore import ExploreError, resolve_repertoires
-    from linkevo.orchestrator.walkmap import Selection, WalkMapError, run_on_ray, walk_map
+    from linkevo.orchestrator.walkmap import (
+        Selection,
+        WalkMapError,
+        refuse_overwrite,
+        run_on_ray,
+        walk_map,
+    )
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     if args.floor not in FLOOR_CHOICES:
@@ -73,7 +79,9 @@ def handle(args: argparse.Namespace) -> int:
     client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
     try:
         trials, _, _ = resolve_repertoires(client, args.ref, args.experiment)
-    except ExploreError as exc:
+        for trial in trials:  # before Ray starts or anything is walked
+            refuse_overwrite(client, trial, args.resume)
+    except (ExploreError, WalkMapError) as exc:
         raise CliError(str(exc)) from exc
 
     import ray
