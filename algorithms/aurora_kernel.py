@@ -9,8 +9,14 @@ Layout: the parameters are one flat float32 vector (layer i's weight (out, in) r
 then its bias), as `PathAutoencoder` keeps them. Activations are feature-major, (units,
 C) with C = the batch rounded up to a multiple of 16 lanes, so that the forward and the
 input-gradient loops run along the batch in whole vectors; padding columns carry zero
-gradient. The weight gradient reads a batch-major copy of each layer's input. Sums run
-in a fixed order for a given build, so training is bit-reproducible on one machine.
+gradient. The weight gradient reads a batch-major copy of each layer's input.
+
+Every sum runs in the order the loops write it, on any CPU: the kernels compile without
+reassociation and without fused multiply-adds, so LLVM may spread a loop over vector
+lanes (the batch columns, each summed on its own) but never regroups a sum or fuses a
+product into it. Training and encoding therefore give the same bits for a seed on every
+x86-64 CPU numba compiles for, from the baseline x86-64 to AVX-512
+(`tests/algorithms/test_aurora_reproducible.py`); docs/aurora.md gives the cost.
 """
 
 from __future__ import annotations
@@ -25,8 +31,9 @@ LANES = 16
 ROWS = 4
 """Output rows computed together; a width's remainder rows are computed one by one."""
 
-_FLAGS = {"fastmath": {"contract", "reassoc"}, "error_model": "numpy", "cache": True}
-"""Fused multiply-adds and reassociated sums (fixed per build, so still reproducible)."""
+_FLAGS = {"fastmath": False, "error_model": "numpy", "cache": True}
+"""IEEE arithmetic in the written order: no reassociated sums, no fused multiply-adds, so
+the bits do not depend on the CPU's vector width or on whether it has FMA."""
 _HELPER = {**_FLAGS, "_nrt": False, "forceinline": True, **NOALIAS}
 """Helpers are inlined by LLVM with their arrays `noalias` (see `sim.kernels._JIT`), which
 lets LLVM keep each row's sums in registers."""
@@ -184,6 +191,36 @@ def train_epoch(
                 n_in, n_out, n_cols, lr, eps,
             )  # fmt: skip
             g, g_in = g_in, g
+
+
+@numba.njit(**_FLAGS)
+def encode_batch(theta, data, sizes, bottleneck, work, out):
+    """Writes the bottleneck codes out (N, code) float64 of the paths data (N, n) float32:
+    the encoder's layers (as `train_epoch` computes them) over blocks of work.shape[2]
+    paths, with the scratch work of `epoch_workspace`."""
+    n = data.shape[0]
+    n_inputs = sizes[0]
+    n_cols = work.shape[2]
+    n_blocks = n_cols // LANES
+    one = np.float32(1.0)
+    for start in range(0, n, n_cols):
+        m = min(n_cols, n - start)
+        x0 = work[0]
+        for b in range(n_cols):
+            for i in range(n_inputs):
+                x0[i, b] = data[start + b, i] if b < m else 0.0
+        offset = 0
+        for layer in range(bottleneck):
+            n_in = sizes[layer]
+            n_out = sizes[layer + 1]
+            w = theta[offset : offset + n_in * n_out].reshape((n_out, n_in))
+            bias = theta[offset + n_in * n_out : offset + n_in * n_out + n_out]
+            multiply_add(w, bias, work[layer], work[layer + 1], n_out, n_in, n_blocks)
+            offset += n_in * n_out + n_out
+        code = work[bottleneck]
+        for b in range(m):
+            for j in range(sizes[bottleneck]):
+                out[start + b, j] = one / (one + np.exp(-code[j, b]))
 
 
 def epoch_workspace(sizes: tuple[int, ...], batch_size: int) -> tuple[np.ndarray, ...]:

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from linkevo.algorithms.aurora_kernel import epoch_workspace, train_epoch
+from linkevo.algorithms.aurora_kernel import encode_batch, epoch_workspace, train_epoch
 
 HIDDEN_SIZES: tuple[int, ...] = (64, 48, 32, 16, 4, 16, 32, 48, 64)
 """Units of the hidden layers; the 4-unit layer is the sigmoid bottleneck."""
@@ -19,6 +19,8 @@ BOTTLENECK = 1 + HIDDEN_SIZES.index(4)
 N_LAYERS = len(HIDDEN_SIZES) + 1
 """Linear layers: ten."""
 CODE_SIZE = 4
+ENCODE_COLUMNS = 256
+"""Paths the compiled encoder takes per block."""
 INITIAL_ACCUMULATOR = 0.1
 """Adagrad's starting sum of squared gradients (Keras's default, as published)."""
 EPSILON = 1e-7
@@ -173,9 +175,20 @@ class PathAutoencoder:
         return activations
 
     def encode(self, x: np.ndarray, *, chunk: int = 65536) -> np.ndarray:
-        """Returns the bottleneck codes of `x` (N, 80), shape (N, 4) float64 in [0, 1]."""
+        """Returns the bottleneck codes of `x` (N, 80), shape (N, 4) float64 in [0, 1].
+
+        With the compiled loop the codes come from the same compiled layers as training,
+        whose bits do not depend on the CPU (`algorithms.aurora_kernel`); elsewhere from
+        torch on the device.
+        """
         self._check(x)
         out = np.empty((x.shape[0], CODE_SIZE), dtype=np.float64)
+        if self._compiled:
+            data = np.ascontiguousarray(x, dtype=np.float32)
+            work = epoch_workspace(self._sizes, ENCODE_COLUMNS)[0]
+            sizes = np.array(self._sizes, dtype=np.int64)
+            encode_batch(self._theta.numpy(), data, sizes, BOTTLENECK, work, out)
+            return out
         with torch_threads(self._threads):
             for start in range(0, x.shape[0], chunk):
                 batch = torch.as_tensor(x[start : start + chunk], dtype=torch.float32)

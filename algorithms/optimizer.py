@@ -7,6 +7,7 @@ from typing import Protocol
 
 import numpy as np
 
+from linkevo.algorithms.common_grid import COMMON_SPACE, CommonGrid
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.mutation import initial_sigma, mutate, n_sigmas
 from linkevo.algorithms.rng_state import decode_rng, encode_rng
@@ -126,6 +127,7 @@ class BaseOptimizer:
         self._iteration = 0
         self._pending: tuple[np.ndarray, np.ndarray] | None = None
         self._best: Individuals | None = None
+        self._common = CommonGrid()
 
     @property
     def eval_fitness(self) -> str:
@@ -184,6 +186,7 @@ class BaseOptimizer:
             foot_y=np.asarray(evaluation.foot_y, dtype=np.float64),
         )
         self._keep_best(batch)
+        self._common.add(evaluation.descriptors[COMMON_SPACE], self._scalar(batch))
         self._survive(batch, initial=self._iteration == 0)
         self._evaluations += len(batch)
         self._iteration += 1
@@ -195,13 +198,16 @@ class BaseOptimizer:
 
     def metrics(self) -> dict[str, float]:
         """Returns iteration, evaluations, best_loss (best-ever), mean_loss (of the kept
-        individuals), coverage, qd_score, ...."""
+        individuals), coverage, qd_score (the approach's own grid), common_coverage and
+        common_qd_score (every genome told, on the MAP-LIS grid: `CommonGrid`), ...."""
         best = np.nan if self._best is None else float(self._scalar(self._best)[0])
         return {
             "iteration": float(self._iteration),
             "evaluations": float(self._evaluations),
             "best_loss": best,
             **self._summary(),
+            "common_coverage": self._common.coverage(),
+            "common_qd_score": self._common.qd_score(self.qd_offset),
         }
 
     def best(self) -> tuple[np.ndarray, float]:
@@ -272,6 +278,7 @@ class BaseOptimizer:
             "optimizer.evaluations": np.array(self._evaluations, dtype=np.int64),
             "optimizer.iteration": np.array(self._iteration, dtype=np.int64),
             **({} if self._best is None else self._best.to_state("best")),
+            **self._common.state_dict(),
             **self._state(),
         }
 
@@ -290,6 +297,7 @@ class BaseOptimizer:
         self._iteration = int(state["optimizer.iteration"])
         self._pending = None
         self._load_state(state)
+        self._common.load_state_dict(state)
         self._best = Individuals.from_state(state, "best") if "best.genome" in state else None
 
     def _scalar(self, kept: Individuals) -> np.ndarray:

@@ -3,9 +3,11 @@
 Runs the trial loop's ask -> evaluate -> tell cycle in-process (no recording) while a
 whole batch fits in the evaluation budget (as `workers.trial.run_trial` does), then
 times, on the trial's last training set (same paths, batch size, learning rate and batch
-order), the compiled CPU loop the trial used, the hand-written torch loop (the GPU path,
-and the CPU loop before the compiled one) and the plain torch.nn + autograd + torch.optim
-loop (`tests/helpers/aurora_reference.py`, the tests' oracle).
+order), the compiled CPU loop the trial used, the same loop compiled with reassociated
+sums and fused multiply-adds (the build before training was made CPU-independent), the
+hand-written torch loop (the GPU path, and the CPU loop before the compiled one) and the
+plain torch.nn + autograd + torch.optim loop (`tests/helpers/aurora_reference.py`, the
+tests' oracle); and the compiled encoder against torch's on the same paths.
 
     .venv/bin/python benchmarks/aurora_trial.py                      # the paper's schedule
     .venv/bin/python benchmarks/aurora_trial.py --initial-epochs 300 --retrain-epochs 100
@@ -17,12 +19,15 @@ import argparse
 import json
 import sys
 import time
+import types
 from dataclasses import fields
 from pathlib import Path
 
+import numba
 import numpy as np
 import torch
 
+from linkevo.algorithms import aurora_kernel, aurora_model
 from linkevo.algorithms.aurora import AuroraMapElites, AuroraSettings
 from linkevo.algorithms.aurora_model import PathAutoencoder
 from linkevo.algorithms.aurora_paths import valid_rows
@@ -48,6 +53,19 @@ def parse_args() -> argparse.Namespace:
     return parser.parse_args()
 
 
+def fast_math_epoch():
+    """Returns `aurora_kernel.train_epoch` compiled as it was before training was made
+    CPU-independent: with reassociated sums and fused multiply-adds."""
+    flags = {"fastmath": {"contract", "reassoc"}, "error_model": "numpy"}
+    helper = {**flags, "_nrt": False, "forceinline": True, **aurora_kernel.NOALIAS}
+    scope = dict(vars(aurora_kernel))  # the copies call each other through this namespace
+    for name in ("multiply_add", "input_gradient", "adagrad_layer"):
+        code = getattr(aurora_kernel, name).py_func.__code__
+        scope[name] = numba.njit(**helper)(types.FunctionType(code, scope, name))
+    code = aurora_kernel.train_epoch.py_func.__code__
+    return numba.njit(**flags)(types.FunctionType(code, scope, "train_epoch"))
+
+
 def compare_loops(
     paths: np.ndarray, settings: AuroraSettings, epochs: int, seed: int
 ) -> dict[str, float]:
@@ -58,24 +76,42 @@ def compare_loops(
     common = {"batch_size": settings.ae_batch_size, "learning_rate": settings.learning_rate}
     steps = epochs * -(-paths.shape[0] // settings.ae_batch_size)
     models = {
-        loop: PathAutoencoder(
-            n_inputs=paths.shape[1], seed=seed, device="cpu", threads=settings.threads, loop=loop
+        name: PathAutoencoder(
+            n_inputs=paths.shape[1], seed=seed, device="cpu", threads=settings.threads,
+            loop="torch" if name == "torch" else "compiled",
         )
-        for loop in ("compiled", "torch")
-    }
+        for name in ("compiled", "fast_math", "torch")
+    }  # fmt: skip
     plain = reference_module(models["torch"].state_dict())
+    kernels = {"compiled": aurora_model.train_epoch, "fast_math": fast_math_epoch()}
     timed = {}
     for name, model in models.items():
+        aurora_model.train_epoch = kernels.get(name, kernels["compiled"])
         model.train(paths, epochs=1, seed=seed, **common)
         started = time.perf_counter()
         model.train(paths, epochs=epochs, seed=seed, **common)
         timed[name] = 1e3 * (time.perf_counter() - started) / steps
+    aurora_model.train_epoch = kernels["compiled"]
+    encoder, reference = models["compiled"], models["torch"]
+    reference.load_state_dict(encoder.state_dict())
+    encoded = {}
+    for name, model in (("compiled", encoder), ("torch", reference)):
+        model._compiled = name == "compiled"  # the same weights, either encoder
+        model.encode(paths[:64])
+        started = time.perf_counter()
+        for _ in range(epochs):
+            model.encode(paths)
+        encoded[name] = 1e3 * (time.perf_counter() - started) / epochs / len(paths) * 10_000
     train_reference(plain, paths, epochs=1, seed=seed, threads=settings.threads, **common)
     started = time.perf_counter()
     train_reference(plain, paths, epochs=epochs, seed=seed, threads=settings.threads, **common)
     timed["plain"] = 1e3 * (time.perf_counter() - started) / steps
     return {
         "compiled_ms_per_step": timed["compiled"],
+        "fast_math_ms_per_step": timed["fast_math"],
+        "cost_of_cpu_independence": timed["compiled"] / timed["fast_math"],
+        "encode_ms_per_10k_compiled": encoded["compiled"],
+        "encode_ms_per_10k_torch": encoded["torch"],
         "torch_ms_per_step": timed["torch"],
         "plain_ms_per_step": timed["plain"],
         "speedup_vs_torch": timed["torch"] / timed["compiled"],
@@ -148,7 +184,8 @@ def main() -> None:
         f"ratio: the compiled loop takes {summary['speedup_vs_torch']:.2f}x fewer seconds per "
         f"step than the torch loop and {summary['speedup_vs_plain']:.2f}x fewer than "
         f"torch.nn+autograd+torch.optim ({paths.shape[0]} paths, batch "
-        f"{optimizer.aurora.ae_batch_size}, one thread)"
+        f"{optimizer.aurora.ae_batch_size}, one thread); CPU-independent sums cost "
+        f"{summary['cost_of_cpu_independence']:.2f}x the reassociated, fused build's time"
     )
     if args.json:
         with open(args.json, "w") as handle:

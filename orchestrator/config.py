@@ -133,8 +133,10 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank` counts only when it is on, so grids without it keep their ids."""
-        out = {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS}
+        `walk_rerank` counts only when it is on, so grids without it keep their ids.
+        `trials` does not count: a trial's seed depends on its index, not on how many the
+        grid holds, so a grid with more trials extends one with fewer (`--resume`)."""
+        out = {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS and k != "trials"}
         if not out["walk_rerank"]:
             del out["walk_rerank"]
         return out

@@ -145,6 +145,19 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
     return specs
 
 
+def check_no_shrink(grid: Grid, earlier: list) -> None:
+    """Raises ConfigError when the store holds trials of the grid beyond its `trials`
+    (a grid's trial count may grow on `--resume`, never shrink: the report would hide the
+    trials left out)."""
+    indices = [int(r.data.tags.get(layout.TRIAL_INDEX, -1)) for r in earlier]
+    held = max(indices, default=-1) + 1
+    if held > grid.config.trials:
+        raise ConfigError(
+            f"config key 'trials' = {grid.config.trials} is invalid for grid {grid.grid_id}: "
+            f"its store already holds trials up to index {held - 1}; allowed: >= {held}"
+        )
+
+
 def check_restart(grid: Grid, restart: tuple[str, ...], resume: bool) -> None:
     """Raises ConfigError for a `--restart-trial` key the grid lacks, or without resume."""
     if not restart:
@@ -217,8 +230,10 @@ def launch(
         if earlier and not resume:
             raise ConfigError(
                 f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {uri}; "
-                "pass --resume to complete it, or change the config (e.g. --set seed=1)"
+                "pass --resume to complete it (or, with a larger trials, to extend it), or "
+                "change the config (e.g. --set seed=1)"
             )
+        check_no_shrink(grid, earlier)
         root = work_root(cfg, uri)
         if resume and not earlier:
             check_store_holds_grid(grid_record(root, grid), uri, grid)

@@ -30,17 +30,23 @@ def parent_run(client: MlflowClient, experiment_id: str, grid: Grid) -> str:
         client.update_run(run_id, status="RUNNING")
         if layout.ERROR in first.data.tags:  # the error of a launch that is over
             client.delete_tag(run_id, layout.ERROR)
+        if first.data.tags.get(layout.TRIALS) != str(grid.config.trials):  # extended
+            client.set_tag(run_id, layout.TRIALS, str(grid.config.trials))
+            client.log_dict(run_id, grid.config.to_dict(), layout.GRID_CONFIG_JSON)
+            client.log_text(run_id, to_toml(grid.config), layout.GRID_CONFIG_TOML)
         return run_id
     tags = {
         layout.KIND: layout.GRID,
         layout.GRID_ID: grid.grid_id,
+        layout.TRIALS: str(grid.config.trials),
         layout.CODE_VERSION: grid.code_version,
         layout.HOST: socket.gethostname(),
         layout.NOTE: grid_description(grid),
     }
     run_id = client.create_run(experiment_id, run_name=f"grid-{grid.grid_id}", tags=tags)
     run_id = run_id.info.run_id
-    params = [Param(k, v) for k, v in flatten(grid.config.to_dict()).items()]
+    # `trials` is a tag, not a param: an extended grid's count changes, a param cannot.
+    params = [Param(k, v) for k, v in flatten(grid.config.to_dict()).items() if k != "trials"]
     for start in range(0, len(params), 100):
         client.log_batch(run_id, params=params[start : start + 100])
     client.log_dict(run_id, grid.config.to_dict(), layout.GRID_CONFIG_JSON)

@@ -53,7 +53,10 @@ class ProgressRecorder:
         )
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
-        """Moves the bar to the evaluations done and shows best loss and coverage."""
+        """Moves the bar to the evaluations done and shows best loss and coverage (a row
+        of end-of-trial measures alone, such as `path_diversity`, leaves it as it is)."""
+        if "evaluations" not in metrics:
+            return
         self._bar.n = int(metrics["evaluations"])
         self._bar.set_postfix(
             best=f"{metrics['best_loss']:.3f}", coverage=f"{metrics['coverage']:.3f}", refresh=False

@@ -15,6 +15,7 @@ import numpy as np
 from linkevo.algorithms import Optimizer, eval_fitness, make_optimizer
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.path_diversity import path_diversity
 from linkevo.sim.physical import physical_checks
 from linkevo.sim.study import (
     APPROACHES,
@@ -264,7 +265,8 @@ def _write_torch_state(optimizer: Optimizer, path: Path) -> None:
         torch.save(torch_state(), tmp)
 
 
-def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
+def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> tuple[float, dict]:
+    """Writes the end-of-trial files; returns the best loss and the kept view."""
     kept = "repertoire" if spec.approach in REPERTOIRE_APPROACHES else "population"
     view = optimizer.view()
     write_parquet_atomic(out_dir / f"{kept}.parquet", view, float32=FLOAT32_COLUMNS)
@@ -273,7 +275,7 @@ def _write_final(spec: TrialSpec, optimizer: Optimizer, out_dir: Path) -> float:
     write_json_atomic(out_dir / BEST_JSON, to_document(genome, spec.mode))
     draw_linkage(genome, spec.mode, out_dir / BEST_PNG)
     _write_torch_state(optimizer, out_dir / ENCODER_PT)
-    return loss
+    return loss, view
 
 
 def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Path) -> float:
@@ -325,8 +327,9 @@ def run_trial(
     the end, atomically), then `repertoire.parquet` and `repertoire.png` (MAP-*,
     RANDOM) or `population.parquet` and `population.png`
     (EA, NSGA2), `best_linkage.json`, `best_linkage.png`, `encoder.pt` (MAP-AU) and
-    `result.json`; finally it
-    calls `recorder.log_artifacts(out_dir)`.
+    `result.json`; the final metric `path_diversity` (`sim.path_diversity`) goes to the
+    recorder with the last iteration's step; finally it calls
+    `recorder.log_artifacts(out_dir)`.
 
     With `resume`, the checkpoint (if any) is loaded, metrics.csv is cut back to the rows
     it had then, those rows are replayed to `recorder.log_iteration`, and the loop goes on;
@@ -406,10 +409,14 @@ def run_trial(
         if deferred is not None:
             bookkeeping(*deferred)
     _checkpoint(spec, optimizer.state_dict(), optimizer, optimizer.iteration, folder)
-    best_loss = _write_final(spec, optimizer, out_dir)
+    best_loss, view = _write_final(spec, optimizer, out_dir)
     metrics = optimizer.metrics()
+    metrics["path_diversity"] = (
+        path_diversity(view["foot_x"], view["foot_y"], view["loss"]) if view else math.nan
+    )
+    recorder.log_iteration(optimizer.iteration, {"path_diversity": metrics["path_diversity"]})
     if spec.walk_rerank:
-        walked = rerank_by_walking(spec, optimizer.view(), out_dir)
+        walked = rerank_by_walking(spec, view, out_dir)
         metrics["best_walk_cm"] = walked
         recorder.log_iteration(optimizer.iteration, {"best_walk_cm": walked})
     result = TrialResult(

@@ -18,7 +18,7 @@ import pandas as pd
 from linkevo.orchestrator.config import ConfigError, from_dict, to_toml
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
-from linkevo.orchestrator.report.findings import Finding, check_findings
+from linkevo.orchestrator.report.findings import Finding, best_path_sizes, check_findings
 from linkevo.orchestrator.report.html import render_html
 from linkevo.orchestrator.report.load import GridData, load_grid
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
@@ -39,6 +39,9 @@ TRIAL_COLUMNS: tuple[str, ...] = (
     "best_loss",
     "coverage",
     "qd_score",
+    "common_coverage",
+    "common_qd_score",
+    "path_diversity",
     "final_evaluations",
 )
 
@@ -103,7 +106,8 @@ def build_report(
 
     Writes `<name>.png` and `<name>.pdf` per figure, `trials.csv`, `best_loss_summary.csv`,
     `pairwise_tests.csv`, `findings.csv`, `best_linkage_checks.csv` (the physical checks of
-    each trial's best linkage) and `report.html`, and logs them all under
+    each trial's best linkage), `path_sizes.csv` (each trial's best-ever foot path's
+    size, `findings.best_path_sizes`) and `report.html`, and logs them all under
     `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
     """
     with tempfile.TemporaryDirectory(prefix="linkevo-report-") as cache:
@@ -113,9 +117,11 @@ def build_report(
         tests = pairwise_tests(grid.trials)
         findings = tuple(check_findings(grid, tests))
         checks = best_linkage_checks(grid)
+        sizes = best_path_sizes(grid)
         made = report_figures(grid)
     with _staged(out) as staging:
-        written = _write_report(grid, tracking_uri, summary, tests, findings, checks, made, staging)
+        tables = {"best_linkage_checks.csv": checks, "path_sizes.csv": sizes}
+        written = _write_report(grid, tracking_uri, summary, tests, findings, tables, made, staging)
     files = [out / path.name for path in written]
     html_path = out / "report.html"
     if log_to_mlflow:
@@ -166,7 +172,7 @@ def _staged(out: Path) -> Iterator[Path]:
 
 
 def _write_report(
-    grid, tracking_uri, summary, tests, findings, checks, made, out: Path
+    grid, tracking_uri, summary, tests, findings, read_tables, made, out: Path
 ) -> list[Path]:
     """Writes the report's files into `out`; returns them (report.html last)."""
     files: list[Path] = []
@@ -186,7 +192,7 @@ def _write_report(
         "best_loss_summary.csv": summary,
         "pairwise_tests.csv": tests,
         "findings.csv": pd.DataFrame([f.__dict__ for f in findings]),
-        "best_linkage_checks.csv": checks,
+        **read_tables,
     }
     for name, table in tables.items():
         path = out / name
@@ -203,7 +209,7 @@ def _write_report(
         tests=tests,
         trials=trials,
         findings=findings,
-        checks=checks_summary(checks),
+        checks=checks_summary(read_tables["best_linkage_checks.csv"]),
     )
     html_path = out / "report.html"
     write_bytes_atomic(html_path, page.encode("utf-8"))

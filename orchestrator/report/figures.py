@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
@@ -26,11 +27,32 @@ from linkevo.workers.plots.repertoire import (
 
 CONVERGENCE_METRICS: tuple[tuple[str, str], ...] = (
     ("best_loss", "best loss"),
-    ("coverage", "coverage"),
-    ("qd_score", "QD-score"),
+    ("coverage", "coverage, own grid"),
+    ("qd_score", "QD-score, own grid"),
+    ("common_coverage", "coverage, common grid"),
+    ("common_qd_score", "QD-score, common grid"),
 )
 MAX_DIMS = 4
 """The most descriptor dimensions a map has (bin_0..bin_3)."""
+
+
+def study_title(grid: GridData, fitness: str | None = None) -> str:
+    """Returns the line every figure carries: mode, budget, trials (and the fitness when
+    the figure shows one), so a figure read on its own says which study it is."""
+    cfg = grid.config
+    counts = grid.trials.groupby(["approach", "fitness"]).size()
+    trials = int(counts.max()) if len(counts) else 0
+    first = [f"{cfg.get('mode', '?')} mode", f"grid {grid.grid_id}"]
+    if fitness is not None:
+        first.insert(0, label(fitness))
+    budget = f"{int(cfg.get('evaluations', 0)):,} evaluations per trial, {trials} trials per cell"
+    return " · ".join(first) + "\n" + budget
+
+
+def thousands(ax, axis: str = "x") -> None:
+    """Writes an axis's tick labels in thousands ("200k"), which stay apart at any width."""
+    formatter = FuncFormatter(lambda v, _: f"{v / 1000:,.0f}k" if v else "0")
+    (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(formatter)
 
 
 @dataclass(frozen=True)
@@ -118,6 +140,7 @@ def best_loss_figure(grid: GridData) -> ReportFigure:
         ax.set_title(label(fitness))
         ax.set_ylabel("best loss")
         ax.grid(axis="y", alpha=0.3)
+    fig.suptitle(study_title(grid), fontsize=8)
     return ReportFigure(
         name="best_loss",
         title="Best loss per trial",
@@ -196,6 +219,7 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
         fig.colorbar(
             shown, ax=axes[row, :].tolist(), shrink=0.8, label=f"best {LOSS_LABEL}", extend="max"
         )
+    fig.suptitle(study_title(grid), fontsize=9)
     return ReportFigure(
         name="repertoire_maps",
         title="Repertoire maps",
@@ -260,6 +284,7 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
             lines = draw_paths(ax, chosen, shape, norm)
             ax.set_title(f"{label(approach)}, {label(fitness)}: {trial.trial_key}", fontsize=8)
     fig.colorbar(lines, ax=axes.ravel().tolist(), shrink=0.6, label=LOSS_LABEL, extend="max")
+    fig.suptitle(study_title(grid, fitness), fontsize=8)
     return ReportFigure(
         name=f"paths_{fitness}",
         title=f"Example paths, {label(fitness)}",
@@ -276,19 +301,23 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
 
 
 def convergence_figure(grid: GridData) -> ReportFigure | None:
-    """Returns best loss, coverage and QD-score against evaluations, median and IQR band.
+    """Returns best loss, coverage and QD-score (own and common grid) against evaluations,
+    median and IQR band.
 
-    Rows are fitness functions; finished trials only. None when no history was logged.
+    Rows are measures, columns fitness functions; finished trials only. None when no
+    history was logged.
     """
     history = grid.history[grid.history.status == "FINISHED"]
-    metrics = [(m, name) for m, name in CONVERGENCE_METRICS if history[m].notna().any()]
+    metrics = [
+        (m, name) for m, name in CONVERGENCE_METRICS if m in history and history[m].notna().any()
+    ]
     if history.empty or not metrics:
         return None
     fitnesses = grid.fitnesses()
-    fig = Figure(figsize=(4.0 * len(metrics), 3.2 * len(fitnesses)), layout="constrained")
-    axes = fig.subplots(len(fitnesses), len(metrics), squeeze=False)
-    for row, fitness in enumerate(fitnesses):
-        for col, (metric, name) in enumerate(metrics):
+    fig = Figure(figsize=(4.6 * len(fitnesses), 2.6 * len(metrics) + 0.8), layout="constrained")
+    axes = fig.subplots(len(metrics), len(fitnesses), squeeze=False, sharex=True)
+    for col, fitness in enumerate(fitnesses):
+        for row, (metric, name) in enumerate(metrics):
             ax = axes[row, col]
             for i, approach in enumerate(grid.approaches()):
                 part = history[(history.fitness == fitness) & (history.approach == approach)]
@@ -301,21 +330,29 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
                 ax.plot(x, q[0.5], lw=1.2, label=label(approach), color=f"C{i}")
                 ax.fill_between(x, q[0.25], q[0.75], color=f"C{i}", alpha=0.2, lw=0)
             ax.set_title(f"{name}, {label(fitness)}", fontsize=9)
-            ax.set_xlabel("evaluations")
-            ax.set_ylabel(name)
+            ax.set_ylabel(name, fontsize=8)
+            ax.xaxis.set_major_locator(MaxNLocator(5))
+            thousands(ax)
+            ax.tick_params(labelsize=7, labelbottom=True)
             ax.grid(alpha=0.3)
-            if ax.lines:
-                ax.legend(fontsize=6)
+        axes[-1, col].set_xlabel("evaluations")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    if handles:
+        fig.legend(handles, labels, loc="outside lower center", ncols=len(handles), fontsize=8)
+    fig.suptitle(study_title(grid), fontsize=9)
     return ReportFigure(
         name="convergence",
         title="Convergence",
         caption=(
-            "Median (line) and inter-quartile range (shaded band) over finished trials of "
-            "the best loss, the coverage and the QD-score against evaluations, per "
-            "approach. Coverage and QD-score are those of the repertoire for MAP-Elites and "
-            "RANDOM (it only grows), and of the current population on a published grid "
-            "(MAP-LIS's unless configured) for the EA and NSGA-II (it can fall), so the "
-            "two kinds do not compare directly."
+            "Per approach, against evaluations: the median over finished trials (line) "
+            "and the inter-quartile range, 25th to 75th percentile, (shaded band) of the "
+            "best loss, the coverage and QD-score on the approach's own grid, and the "
+            "coverage and QD-score on the common grid. Own grid: the repertoire for "
+            "MAP-Elites and RANDOM (it only grows; MAP-AU's is re-placed at each "
+            "retraining, hence its saw-tooth), the current population on the MAP-LIS grid "
+            "for the EA and NSGA-II (it can fall). Common grid: every genome the approach "
+            "evaluated, binned on the MAP-LIS grid (cumulative for every approach, so the "
+            "rows compare across approaches)."
         ),
         figure=fig,
     )

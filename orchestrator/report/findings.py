@@ -92,21 +92,27 @@ def _map_versus(
 
 
 def best_path_sizes(grid: GridData) -> pd.DataFrame:
-    """Returns the size of each finished trial's best-ever foot path (max of width and
-    height), read from its best-linkage document.
+    """Returns the size of each finished trial's best-ever foot path, read from its
+    best-linkage document, in model units (`../shared/spec`: 8 mm a module).
 
     Returns:
-        Columns trial_key, approach, fitness, size.
+        Columns trial_key, approach, fitness, width, height, size (the larger of the two),
+        failed_angles (the linkage's crank angles that do not assemble; the path skips
+        them, which is how F_sl's best linkages reach their size, docs/results.md).
     """
     trials = grid.finished()
     rows = []
     for trial in trials[trials.best_linkage.notna()].itertuples():
-        path = json.loads(Path(trial.best_linkage).read_text())["foot_path"]
+        doc = json.loads(Path(trial.best_linkage).read_text())
+        path = doc["foot_path"]
         x, y = np.array(path["x"], dtype=float), np.array(path["y"], dtype=float)  # None: NaN
         if np.isfinite(x).any():
-            size = max(np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y))
-            rows.append((trial.trial_key, trial.approach, trial.fitness, float(size)))
-    return pd.DataFrame(rows, columns=["trial_key", "approach", "fitness", "size"])
+            width, height = np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y)
+            size = max(width, height)
+            key = (trial.trial_key, trial.approach, trial.fitness)
+            rows.append((*key, width, height, size, int(doc["error"])))
+    columns = ["trial_key", "approach", "fitness", "width", "height", "size", "failed_angles"]
+    return pd.DataFrame(rows, columns=columns)
 
 
 def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:

@@ -24,8 +24,14 @@ HISTORY_COLUMNS: tuple[str, ...] = (
     "mean_loss",
     "coverage",
     "qd_score",
+    "common_coverage",
+    "common_qd_score",
     "hypervolume",
 )
+FINAL_MEASURES: tuple[str, ...] = ("common_coverage", "common_qd_score", "path_diversity")
+"""Per-trial measures read as their last logged value: coverage and QD-score of every
+evaluated genome on the common MAP-LIS grid (`algorithms.common_grid`), and the diversity
+of the best paths (`sim.path_diversity`); NaN for a trial that did not log them."""
 ARCHIVE_FILES: tuple[str, ...] = (layout.REPERTOIRE, layout.POPULATION)
 STATUS_MISSING = "MISSING"
 DOWNLOAD_THREADS = 8
@@ -48,8 +54,9 @@ class GridData:
             trial_key, approach, fitness, trial_index, seed, run_id, status (FINISHED,
             FAILED, KILLED, RUNNING or MISSING), error, best_loss (the best-ever loss, the
             last logged value), coverage and qd_score (last logged; the approach's own grid
-            for MAP-Elites, the MAP-LIS grid for EA, NSGA-II and RANDOM), all NaN unless
-            FINISHED with metrics, final_evaluations, archive (local parquet path or
+            for MAP-Elites, the current population on the MAP-LIS grid for EA and NSGA-II,
+            RANDOM's samples on it), the `FINAL_MEASURES`, all NaN unless FINISHED with
+            metrics, final_evaluations, archive (local parquet path or
             None), best_linkage (local path of the best-ever linkage document, or None).
         history: long table, one row per trial and iteration: trial_key, approach,
             fitness, status and the HISTORY_COLUMNS present in the runs (NaN where a run
@@ -280,6 +287,12 @@ def _trial_table(
             for h in histories
         ]
 
+    def final(name: str) -> list[float]:
+        """A measure logged once at the end (the run's value), else its last row."""
+        column = f"metrics.{name}"
+        logged = runs[column].astype(float).tolist() if column in runs else [np.nan] * len(runs)
+        return [v if np.isfinite(v) else h for v, h in zip(logged, last(name), strict=True)]
+
     evals = [
         float(h.evaluations.max()) if "evaluations" in h and len(h) else np.nan for h in histories
     ]
@@ -296,12 +309,14 @@ def _trial_table(
             "best_loss": last("best_loss"),  # best-ever: the last value is the lowest
             "coverage": last("coverage"),
             "qd_score": last("qd_score"),
+            **{name: final(name) for name in FINAL_MEASURES},
             "final_evaluations": evals,
             "archive": [str(a) if a is not None else None for a in archives],
             "best_linkage": [str(b) if b is not None else None for b in best_linkages],
         }
     )
-    table.loc[table.status != "FINISHED", ["best_loss", "coverage", "qd_score"]] = np.nan
+    measures = ["best_loss", "coverage", "qd_score", *FINAL_MEASURES]
+    table.loc[table.status != "FINISHED", measures] = np.nan
     return table
 
 
@@ -341,6 +356,7 @@ def _add_missing(trials: pd.DataFrame, config: dict) -> pd.DataFrame:
             "best_loss": float,
             "coverage": float,
             "qd_score": float,
+            **dict.fromkeys(FINAL_MEASURES, float),
             "final_evaluations": float,
             "trial_index": float,
         }

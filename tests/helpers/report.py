@@ -107,6 +107,10 @@ def _history(rng, approach: str, final: float, spec: GridSpec) -> pd.DataFrame:
     coverage = np.linspace(0.05, 0.5, spec.iterations) * rng.uniform(0.8, 1.2)
     table["coverage"] = coverage
     table["qd_score"] = coverage * 10_000 * (100 - best)
+    common = np.linspace(0.1, 0.6, spec.iterations) * rng.uniform(0.8, 1.2)
+    table["common_coverage"] = common
+    table["common_qd_score"] = common * 10_000 * (100 - best)
+    table["path_diversity"] = np.where(k == k[-1], rng.uniform(0.2, 1.0), np.nan)
     if approach == "NSGA2":
         table["hypervolume"] = np.linspace(1.0, 2.0, spec.iterations)
     return table

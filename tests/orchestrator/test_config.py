@@ -92,7 +92,11 @@ def test_identity_leaves_out_how_and_where_a_grid_runs():
     base = GridConfig(trials=2)
     moved = GridConfig(trials=2, evaluators_per_trial=3, tracking_uri="http://x", work_dir="/w")
     assert base.identity() == moved.identity()
-    assert base.identity() != GridConfig(trials=3).identity()
+    assert base.identity() != GridConfig(trials=2, evaluations=400).identity()
+
+
+def test_identity_leaves_out_the_trial_count_so_a_grid_can_grow():
+    assert GridConfig(trials=10).identity() == GridConfig(trials=30).identity()
 
 
 def test_flatten_turns_tables_into_dotted_params():

@@ -112,7 +112,24 @@ def test_small_grid_ends_with_one_finished_run_per_trial_key(ray_local, tmp_path
         launch(grid, progress=False)
     again = launch(grid, resume=True, progress=False)
     assert sorted(again.skipped) == sorted(c.key for c in grid.cells)
-    assert all(len(v) == 1 for v in runs_by_key(uri, grid.grid_id).values())
+    before = runs_by_key(uri, grid.grid_id)
+    assert all(len(v) == 1 for v in before.values())
+
+    # A larger `trials` on --resume extends the finished grid: only the new indices run.
+    wider = tiny_grid(tmp_path, trials=3)
+    assert wider.grid_id == grid.grid_id
+    extended = launch(wider, resume=True, progress=False)
+    assert sorted(extended.skipped) == sorted(before)
+    after = runs_by_key(uri, grid.grid_id)
+    assert sorted(set(after) - set(before)) == sorted(c.key for c in wider.cells if c.index == 2)
+    assert all(after[key] == before[key] for key in before)  # the first trials untouched
+    parent = client.get_run(result.parent_run_id)
+    assert parent.data.tags["trials"] == "3"
+    assert "| MAP-LIS | Fsl | 3/3 |" in parent.data.tags["mlflow.note.content"]
+    path = client.download_artifacts(parent.info.run_id, "grid_config.json", str(tmp_path / "x"))
+    assert json.loads(Path(path).read_text())["trials"] == 3
+    with pytest.raises(ConfigError, match=r"'trials' = 2 is invalid .* allowed: >= 3"):
+        launch(grid, resume=True, progress=False)
 
 
 def test_failed_trial_is_reported_and_the_others_finish(ray_local, tmp_path):

@@ -46,6 +46,10 @@ def test_grid_id_hashes_results_config_and_code_version():
     assert Grid.from_config(GridConfig(trials=2, max_concurrent_trials=7), "v1").grid_id == grid_id
     assert Grid.from_config(cfg, "v2").grid_id != grid_id
     assert Grid.from_config(GridConfig(trials=2, evaluations=10), "v1").grid_id != grid_id
+    assert (
+        Grid.from_config(GridConfig(trials=30), "v1").grid_id
+        == Grid.from_config(GridConfig(trials=10), "v1").grid_id
+    )  # more trials extend a grid
 
 
 def test_dry_run_prints_the_plan_and_starts_nothing(tmp_path, capsys):

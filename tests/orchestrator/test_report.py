@@ -84,6 +84,21 @@ def test_summary_table_equals_values_recomputed_from_raw_metrics(grid):
         assert row.min == pytest.approx(values.min(), rel=1e-12)
 
 
+def test_trials_csv_carries_the_common_grid_and_path_diversity_as_logged(grid):
+    written, result = grid
+    client = MlflowClient(tracking_uri=written.uri)
+    trials = pd.read_csv(result.out_dir / "trials.csv").set_index("trial_key")
+    finished = trials[trials.status == "FINISHED"]
+    assert len(finished) > 0
+    for key, row in finished.iterrows():
+        logged = client.get_run(written.run_ids[key]).data.metrics
+        for name in ("common_coverage", "common_qd_score", "path_diversity"):
+            assert row[name] == pytest.approx(logged[name], rel=1e-12), (key, name)
+    sizes = pd.read_csv(result.out_dir / "path_sizes.csv")
+    assert len(sizes) == len(finished)
+    assert (sizes["size"] == sizes[["width", "height"]].max(axis=1)).all()
+
+
 def test_best_linkages_physical_checks_match_their_genomes(grid, loaded):
     _, result = grid
     table = pd.read_csv(result.out_dir / "best_linkage_checks.csv")
@@ -200,12 +215,18 @@ def test_each_figure_has_its_panels_and_labels(loaded):
 
     conv = fig.convergence_figure(loaded).figure
     titles = [ax.get_title() for ax in conv.axes]
-    assert titles == [
-        f"{m}, {f}" for f in ("F_p", "F_sl") for m in ("best loss", "coverage", "QD-score")
-    ]
-    assert all(ax.get_xlabel() == "evaluations" for ax in conv.axes)
-    legend = [t.get_text() for t in conv.axes[0].get_legend().get_texts()]
+    measures = [name for _, name in fig.CONVERGENCE_METRICS]
+    assert titles == [f"{m}, {f}" for m in measures for f in ("F_p", "F_sl")]
+    assert [ax.get_xlabel() for ax in conv.axes[-2:]] == ["evaluations"] * 2
+    legend = [t.get_text() for t in conv.legends[0].get_texts()]
     assert legend == ["EA", "NSGA-II", "MAP-WH", "MAP-ST"]
+    conv.canvas.draw()
+    ticks = [t.get_text() for t in conv.axes[-1].get_xticklabels() if t.get_text()]
+    assert ticks and all(t == "0" or t.endswith("k") for t in ticks), ticks
+    for figure in (maps, paths, conv):  # every figure says which study it shows
+        assert "paper mode" in figure.get_suptitle() and "evaluations per trial" in (
+            figure.get_suptitle()
+        )
 
 
 def test_repertoire_map_holds_the_best_loss_per_cell_over_trials(loaded):

@@ -14,6 +14,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.path_diversity import path_diversity
 from linkevo.workers.checkpoint import CheckpointError
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
@@ -28,10 +29,13 @@ class ListRecorder:
 
     def __init__(self) -> None:
         self.iterations: list[tuple[int, dict[str, float]]] = []
+        self.finals: list[tuple[int, dict[str, float]]] = []
         self.artifacts: list[Path] = []
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
-        self.iterations.append((iteration, dict(metrics)))
+        """Keeps an iteration's row, or apart the end-of-trial measures (no evaluations)."""
+        kept = self.iterations if "evaluations" in metrics else self.finals
+        kept.append((iteration, dict(metrics)))
 
     def log_artifacts(self, out_dir: Path) -> None:
         self.artifacts.append(out_dir)
@@ -100,6 +104,11 @@ def test_trial_writes_every_artefact(approach: str, tmp_path: Path) -> None:
         assert all(b <= a for a, b in itertools.pairwise(best))
     assert [i for i, _ in recorder.iterations] == list(range(1, 7))
     assert recorder.artifacts == [tmp_path]
+    ((step, final),) = recorder.finals  # the path diversity of what the trial kept
+    kept = pd.read_parquet(next(tmp_path.glob("*.parquet")))
+    expected = path_diversity(np.stack(kept.foot_x), np.stack(kept.foot_y), kept.loss.to_numpy())
+    assert step == 6 and final == {"path_diversity": pytest.approx(expected, rel=1e-6)}
+    assert 0.0 < final["path_diversity"] < 2.0
 
     name = "repertoire.parquet" if approach == "MAP-LIS" else "population.parquet"
     table = pq.read_table(tmp_path / name)

@@ -28,6 +28,9 @@ APPROACH = "approach"
 FITNESS = "fitness"
 SEED = "seed"
 CODE_VERSION = "code_version"
+TRIALS = "trials"
+"""A grid parent's trials per approach and fitness: the latest launch's (a grid extended
+with `--resume --set trials=N` holds more than its first launch)."""
 HOST = "host"
 RAY_NODE = "ray_node"
 TRIAL_TAGS: tuple[str, str, str] = (APPROACH, FITNESS, TRIAL_INDEX)
