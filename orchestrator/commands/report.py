@@ -33,6 +33,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--no-log", action="store_true", help="do not log the report to the grid's parent run"
     )
+    parser.add_argument(
+        "--trials",
+        type=int,
+        default=None,
+        metavar="N",
+        help="report only the first N trials of each approach and fitness (a grown grid's "
+        "answer at N trials; logged under report-first<N>/) (default: all)",
+    )
     parser.set_defaults(func=handler)
 
     compare = subparsers.add_parser(
@@ -66,6 +74,7 @@ def _store_options(parser: argparse.ArgumentParser) -> None:
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
     from linkevo.orchestrator.report import GridNotFoundError, ReportNotLogged, build_report
+    from linkevo.orchestrator.report.build import report_folder
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     if args.grid_id is not None and not layout.ID_PATTERN.fullmatch(args.grid_id):
@@ -73,6 +82,8 @@ def handler(args: argparse.Namespace) -> int:
             f"grid id {args.grid_id!r} is invalid; allowed: letters, digits, '.', '_', '-' "
             "(see the grid_id tag of a grid run, or use --latest)"
         )
+    if args.trials is not None and args.trials < 1:
+        raise CliError(f"--trials {args.trials} is invalid; allowed: an integer >= 1")
     if args.out is not None and args.out.exists() and not args.out.is_dir():
         raise CliError(f"--out {str(args.out)!r} is a file; allowed: a folder (new or existing)")
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
@@ -83,6 +94,7 @@ def handler(args: argparse.Namespace) -> int:
             args.out,
             experiment=args.experiment,
             log_to_mlflow=not args.no_log,
+            first_trials=args.trials,
         )
     except GridNotFoundError as exc:
         raise CliError(str(exc)) from exc
@@ -93,7 +105,8 @@ def handler(args: argparse.Namespace) -> int:
     for finding in result.findings:
         print(f"  [{finding.verdict}] {finding.claim} {finding.evidence}")
     if not args.no_log:
-        print(f"logged under report/ in parent run {result.parent_run_id}")
+        folder = report_folder(args.trials)
+        print(f"logged under {folder}/ in parent run {result.parent_run_id}")
     return 0
 
 

@@ -25,6 +25,13 @@ from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
 from linkevo.workers.store.artifacts import write_bytes_atomic
 
 REPORT_ARTIFACT_DIR = "report"
+
+
+def report_folder(first_trials: int | None) -> str:
+    """Returns the parent run's artefact folder of a report (of the first N trials)."""
+    return REPORT_ARTIFACT_DIR if first_trials is None else f"report-first{first_trials}"
+
+
 """Where the report lands among the grid parent run's artefacts."""
 PNG_DPI = 150
 TRIAL_COLUMNS: tuple[str, ...] = (
@@ -101,6 +108,7 @@ def build_report(
     *,
     experiment: str = "linkevo",
     log_to_mlflow: bool = True,
+    first_trials: int | None = None,
 ) -> ReportResult:
     """Returns the report of one grid (None: the latest), written to `out_dir`.
 
@@ -109,10 +117,14 @@ def build_report(
     each trial's best linkage), `path_sizes.csv` (each trial's best-ever foot path's
     size, `findings.best_path_sizes`) and `report.html`, and logs them all under
     `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
+    With `first_trials` = N only trial indices 0..N-1 of each cell count (a grid grown by
+    `--resume --set trials=...` answered at its first N trials); the report goes to
+    `reports/<grid_id>-first<N>` and `report-first<N>/`.
     """
     with tempfile.TemporaryDirectory(prefix="linkevo-report-") as cache:
-        grid = load_grid(tracking_uri, grid_id, Path(cache), experiment)
-        out = Path(out_dir) if out_dir is not None else Path("reports") / grid.grid_id
+        grid = load_grid(tracking_uri, grid_id, Path(cache), experiment, first_trials)
+        name = grid.grid_id if first_trials is None else f"{grid.grid_id}-first{first_trials}"
+        out = Path(out_dir) if out_dir is not None else Path("reports") / name
         summary = summary_table(grid.trials)
         tests = pairwise_tests(grid.trials)
         findings = tuple(check_findings(grid, tests))
@@ -130,7 +142,7 @@ def build_report(
         client = MlflowClient(tracking_uri=tracking_uri)
         try:
             for path in files:
-                client.log_artifact(grid.parent_run_id, str(path), REPORT_ARTIFACT_DIR)
+                client.log_artifact(grid.parent_run_id, str(path), report_folder(first_trials))
         except Exception as exc:
             raise ReportNotLogged(
                 f"the report is complete in {out}, but logging it to parent run "

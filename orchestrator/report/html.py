@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from linkevo.orchestrator.report.findings import HOLDS, REPRODUCED, Finding
+from linkevo.orchestrator.report.findings import REPRODUCED, Finding
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG
 from linkevo.sim.study import STUDY_EVALUATIONS
 
@@ -134,7 +134,7 @@ def render_html(
     parts.append("<h2>The study's findings on this grid</h2><table>")
     parts.append("<tr><th>claim</th><th>verdict</th><th>rule</th><th>evidence</th></tr>")
     for f in findings:
-        css = "reproduced" if f.verdict in (REPRODUCED, HOLDS) else "other"
+        css = "reproduced" if f.verdict == REPRODUCED else "other"
         parts.append(
             f"<tr><td class='text'>{html.escape(f.claim)}</td>"
             f"<td class='text {css}'>{html.escape(f.verdict)}</td>"

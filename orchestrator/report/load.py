@@ -135,8 +135,10 @@ def load_grid(
     grid_id: str | None,
     cache_dir: Path,
     experiment: str = "linkevo",
+    first_trials: int | None = None,
 ) -> GridData:
-    """Returns one grid's runs, histories and archive paths (`grid_id` None: the latest).
+    """Returns one grid's runs, histories and archive paths (`grid_id` None: the latest);
+    with `first_trials` = N, only trial indices below N (the config then says N trials).
 
     One paged search lists the trials; each trial's `metrics.csv` and archive
     parquet are read straight from a file-based artefact store, otherwise downloaded in
@@ -151,6 +153,10 @@ def load_grid(
     parent = client.get_run(parent_id)
     config = _grid_config(parent, cache_dir, tracking_uri)
     runs = latest_per_trial(runs)
+    if first_trials is not None and len(runs):
+        index = pd.to_numeric(runs.get(f"tags.{layout.TRIAL_INDEX}"), errors="coerce")
+        runs = runs[index < first_trials].reset_index(drop=True)
+        config = {**config, "trials": min(int(config.get("trials", first_trials)), first_trials)}
     with ThreadPoolExecutor(DOWNLOAD_THREADS) as pool:
         fetched = list(
             pool.map(

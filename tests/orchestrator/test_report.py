@@ -20,7 +20,7 @@ from linkevo.orchestrator.report import build_report, load_grid
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import checks_summary
 from linkevo.orchestrator.report.findings import (
-    NO_DIFFERENCE,
+    NOT_SHOWN,
     NOT_TESTABLE,
     REPRODUCED,
     check_findings,
@@ -263,19 +263,20 @@ def test_fold_bins_nests_the_inner_dimensions_in_blocks():
 def test_findings_are_checked_with_their_numbers(grid, loaded):
     _, result = grid
     verdicts = {f.claim: f for f in result.findings}
-    beats_ea = verdicts["With F_p, the MAP-Elites approaches beat the EA."]
+    beats_ea = verdicts["With F_p, the MAP-Elites approaches beat the EA (Results)."]
     assert beats_ea.verdict == REPRODUCED
     assert "MAP-WH median" in beats_ea.evidence and "Holm p" in beats_ea.evidence
-    assert verdicts["With F_p, the MAP-Elites approaches slightly beat NSGA-II."].verdict == (
-        REPRODUCED
-    )
+    assert verdicts[
+        "With F_p, the MAP-Elites approaches slightly beat NSGA-II (Results)."
+    ].verdict == (REPRODUCED)
     fsl = result.tests[result.tests.fitness == "Fsl"]
-    similar = verdicts["With F_sl, all approaches perform similarly."]
-    assert (similar.verdict == NO_DIFFERENCE) == (not fsl.significant.any())
-    assert "no evidence of similarity" in similar.evidence
+    similar = verdicts["With F_sl, all approaches perform similarly (Results)."]
+    assert similar.verdict in (NOT_SHOWN, REPRODUCED) or fsl.significant.any()
+    assert "pairs" in similar.evidence
     findings_csv = pd.read_csv(result.out_dir / "findings.csv")
     assert findings_csv.verdict.tolist() == [f.verdict for f in result.findings]
-    assert verdicts["F_sl tends to evolve oversized linkages."].verdict == REPRODUCED
+    oversized = "With F_sl, the approaches created linkages that were too large to be realised"
+    assert verdicts[f"{oversized} (Results, Discussion)."].verdict == REPRODUCED
     without_ea = pairwise_tests(loaded.trials[loaded.trials.approach != "EA"])
     assert check_findings(loaded, without_ea)[0].verdict == NOT_TESTABLE
 
@@ -329,6 +330,25 @@ def test_cli_reports_latest_grid_and_names_unknown_grids(grid, tmp_path, capsys)
     assert 'grid id "a\'b" is invalid' in capsys.readouterr().err
     assert main(["report", "--latest", "--tracking-uri", f"sqlite:///{tmp_path}/x.db"]) == 2
     assert "no MLflow store at" in capsys.readouterr().err
+
+
+def test_a_grown_grid_is_answered_at_its_first_trials_too(grid, tmp_path, capsys):
+    written, full = grid
+    out = tmp_path / "first2"
+    argv = ["report", SPEC.grid_id, "--tracking-uri", written.uri, "--trials", "2"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert "logged under report-first2/" in capsys.readouterr().out
+    trials = pd.read_csv(out / "trials.csv")
+    assert set(trials.trial_index) == {0, 1}
+    summary = pd.read_csv(out / "best_loss_summary.csv")
+    assert (
+        summary.n_finished.max() <= 2 < pd.read_csv(full.out_dir / "trials.csv").trial_index.max()
+    )
+    client = MlflowClient(tracking_uri=written.uri)
+    logged = {a.path for a in client.list_artifacts(written.parent_run_id, "report-first2")}
+    assert "report-first2/trials.csv" in logged
+    assert main([*argv[:-1], "0"]) == 2
+    assert "--trials 0 is invalid; allowed: an integer >= 1" in capsys.readouterr().err
 
 
 def test_a_grid_below_the_study_budget_is_a_pipeline_check_without_verdicts(tmp_path):

@@ -7,8 +7,24 @@ import pandas as pd
 import pytest
 from scipy.stats import mannwhitneyu
 
+from linkevo.orchestrator.report.findings import (
+    CONTRADICTED,
+    DIRECTION_ONLY,
+    NOT_REPRODUCED,
+    NOT_SHOWN,
+    REPRODUCED,
+    judge,
+    similar,
+    weakest,
+)
 from linkevo.orchestrator.report.html import context
-from linkevo.orchestrator.report.stats import mann_whitney, pairwise_tests, summary_table
+from linkevo.orchestrator.report.stats import (
+    a12,
+    a12_interval,
+    mann_whitney,
+    pairwise_tests,
+    summary_table,
+)
 
 
 def trials(losses: dict[tuple[str, str], list[float]]) -> pd.DataFrame:
@@ -77,3 +93,29 @@ def test_summary_counts_every_finished_trial(approach):
     table = trials({(approach, "Fsl"): [-3.0, -1.0, -2.0]})
     row = summary_table(table).iloc[0]
     assert (row.n_finished, row["median"], row["min"]) == (3, -2.0, -3.0)
+
+
+def test_a12_interval_brackets_the_estimate_and_is_reproducible():
+    rng = np.random.default_rng(3)
+    x, y = rng.normal(0.0, 1.0, 10), rng.normal(1.0, 1.0, 10)
+    low, high = a12_interval(x, y)
+    assert low <= a12(x, y) <= high and high - low > 0.1
+    assert a12_interval(x, y) == (low, high)  # seeded
+    assert a12_interval(np.zeros(10), np.ones(10)) == (0.0, 0.0)  # no overlap: A12 is 0
+
+
+def test_one_rule_judges_every_claim():
+    def row(a12, low, high, p):
+        return pd.Series({"a12": a12, "a12_low": low, "a12_high": high, "p_holm": p})
+
+    assert judge(row(0.10, 0.02, 0.30, 0.01)) == REPRODUCED
+    assert judge(row(0.10, 0.02, 0.30, 0.20)) == DIRECTION_ONLY  # not significant
+    assert judge(row(0.40, 0.15, 0.65, 0.04)) == DIRECTION_ONLY  # interval holds 0.5
+    assert judge(row(0.60, 0.35, 0.85, 0.50)) == NOT_REPRODUCED
+    assert judge(row(0.90, 0.75, 1.00, 0.01)) == CONTRADICTED
+    assert judge(row(0.90, 0.75, 1.00, 0.01), lower=False) == REPRODUCED
+    assert similar(row(0.50, 0.35, 0.66, 0.90)) == REPRODUCED
+    assert similar(row(0.50, 0.20, 0.80, 0.90)) == NOT_SHOWN  # too wide to say
+    assert similar(row(0.05, 0.00, 0.15, 0.01)) == NOT_REPRODUCED
+    assert weakest([REPRODUCED, DIRECTION_ONLY, REPRODUCED]) == DIRECTION_ONLY
+    assert weakest([REPRODUCED, CONTRADICTED, NOT_REPRODUCED]) == CONTRADICTED

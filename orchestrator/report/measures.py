@@ -1,0 +1,72 @@
+"""Provides `trial_measures`: per-trial numbers some of the study's claims are judged on,
+beyond the ones each trial logs (best loss, coverage, common grid, path diversity)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from scipy.stats import spearmanr
+
+from linkevo.algorithms.pareto import non_dominated_ranks
+from linkevo.orchestrator.report.load import GridData, read_archive
+from linkevo.sim.study import is_map_elites, is_pareto
+
+MEASURE_COLUMNS: tuple[str, ...] = ("stagnation", "descriptor_correlation", "front_size")
+
+
+def stagnation(history: pd.DataFrame) -> float:
+    """Returns the share of a trial's evaluations spent after its last best-loss
+    improvement (0: still improving at the end; near 1: stuck early), from its
+    history rows (evaluations, best_loss)."""
+    rows = history[history.best_loss.notna()].sort_values("evaluations")
+    if rows.empty:
+        return np.nan
+    improved = rows.evaluations[rows.best_loss.diff().fillna(-1.0) < 0].iloc[-1]
+    total = rows.evaluations.iloc[-1]
+    return float((total - improved) / total)
+
+
+def descriptor_correlation(archive: pd.DataFrame) -> float:
+    """Returns the largest |Spearman rho| between one of a repertoire's descriptors and its
+    elites' loss: how far the map's dimensions say what the fitness says."""
+    desc = [c for c in archive.columns if c.startswith("desc_")]
+    finite = archive[np.isfinite(archive.loss)]
+    if len(finite) < 3 or not desc:
+        return np.nan
+    rhos = [abs(spearmanr(finite[c], finite.loss).statistic) for c in desc]
+    return float(np.nanmax(rhos)) if np.isfinite(rhos).any() else np.nan
+
+
+def front_size(archive: pd.DataFrame) -> float:
+    """Returns the number of distinct mutually non-dominated (loss_0, loss_1) points of a
+    two-objective population."""
+    losses = archive[["loss_0", "loss_1"]].to_numpy(dtype=float)
+    losses = np.unique(losses[np.isfinite(losses).all(axis=1)], axis=0)
+    return float((non_dominated_ranks(losses) == 0).sum()) if len(losses) else np.nan
+
+
+def trial_measures(grid: GridData) -> pd.DataFrame:
+    """Returns the finished trials (`GridData.finished`) with `MEASURE_COLUMNS` added:
+    stagnation (every approach), descriptor_correlation (MAP-Elites repertoires) and
+    front_size (NSGA-II populations); NaN where a measure does not apply or its data is
+    missing."""
+    trials = grid.finished().copy()
+    history = grid.history
+    trials["stagnation"] = [
+        stagnation(history[history.trial_key == key]) for key in trials.trial_key
+    ]
+    correlation, fronts = [], []
+    for trial in trials.itertuples():
+        has = isinstance(trial.archive, str)
+        if has and is_map_elites(trial.approach):
+            columns = ["loss", *(f"desc_{d}" for d in range(4))]
+            correlation.append(descriptor_correlation(read_archive(trial.archive, columns)))
+        else:
+            correlation.append(np.nan)
+        if has and is_pareto(trial.approach):
+            fronts.append(front_size(read_archive(trial.archive, ["loss_0", "loss_1"])))
+        else:
+            fronts.append(np.nan)
+    trials["descriptor_correlation"] = correlation
+    trials["front_size"] = fronts
+    return trials
