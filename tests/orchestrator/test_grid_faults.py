@@ -22,7 +22,7 @@ from linkevo.orchestrator.grid import Grid
 from linkevo.orchestrator.grid_lease import LEASE_TTL_S, Holder
 from linkevo.orchestrator.reaper import stat_of, tree
 from linkevo.workers.store import run_layout as layout
-from linkevo.workers.store.tracking import ensure_experiment
+from linkevo.workers.store.tracking import ensure_experiment, store_lock
 from tests.helpers.grid import runs_by_key, tiny_config_file
 from tests.helpers.mlflow_server import free_port, start_server
 from tests.helpers.sockets import is_loopback, listening_addresses
@@ -67,7 +67,10 @@ class _Linkevo:
 
 
 def _lease(uri: str, grid_id: str) -> Holder | None:
-    experiment = MlflowClient(uri).get_experiment_by_name("linkevo")
+    # Under the store's lock, as the driver opens it: a fresh sqlite store is created by
+    # whichever opens it first, and MLflow's schema migration does not survive two at once.
+    with store_lock(uri):
+        experiment = MlflowClient(uri).get_experiment_by_name("linkevo")
     text = None if experiment is None else experiment.tags.get(layout.lease_tag(grid_id))
     return None if text is None else Holder(**json.loads(text))
 
@@ -81,7 +84,9 @@ def _wait_for(predicate, seconds: float, what: str) -> None:
 
 def _one_finished(uri: str, grid_id: str) -> bool:
     try:
-        return any(s == "FINISHED" for r in runs_by_key(uri, grid_id).values() for _, s in r)
+        with store_lock(uri):  # as `_lease`: never the second to create a fresh store
+            runs = runs_by_key(uri, grid_id)
+        return any(s == "FINISHED" for r in runs.values() for _, s in r)
     except Exception:
         return False
 

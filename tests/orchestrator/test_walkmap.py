@@ -203,7 +203,7 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
             "--tracking-uri", uri]  # fmt: skip
     proc = subprocess.Popen([str(linkevo), *args], stderr=subprocess.PIPE)
     seen, deadline = b"", time.monotonic() + 120
-    while not re.search(rb"\| ([4-9]|\d\d)/30 ", seen):  # a few walks done
+    while not re.search(rb"\| ([1-9]|\d\d)/30 ", seen):  # walks done, most still to do
         assert time.monotonic() < deadline and proc.poll() is None, seen.decode()[-500:]
         if select.select([proc.stderr], [], [], 0.5)[0]:
             seen += proc.stderr.read1(4096)
@@ -212,7 +212,7 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
     assert proc.returncode == 130
     assert f"linkevo walkmap {run_id} --resume" in (seen + rest).decode()
     partial = _walk_map(uri, run_id, tmp_path / "partial")
-    assert 4 <= len(partial) < 30
+    assert 1 <= len(partial) < 30
 
     assert main([*args, "--resume"]) == 0
     complete = _walk_map(uri, run_id, tmp_path / "complete")
