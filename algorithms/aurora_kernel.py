@@ -124,6 +124,27 @@ def adagrad_layer(w, w_sum, bias, b_sum, g, x, x_t, grad, zeros, n_in, n_out, n_
             w[j, i] -= lr * grad[j, i] / (np.sqrt(s) + eps)
 
 
+@numba.njit(**_HELPER)
+def forward(theta, sizes, stop, bottleneck, work, n_blocks):
+    """Runs layers 0..stop-1 on the block in work[0], each layer's output in work[layer + 1]
+    (layer bottleneck - 1 through the sigmoid); returns the parameter offset after them."""
+    one = np.float32(1.0)
+    offset = 0
+    for layer in range(stop):
+        n_in = sizes[layer]
+        n_out = sizes[layer + 1]
+        w = theta[offset : offset + n_in * n_out].reshape((n_out, n_in))
+        bias = theta[offset + n_in * n_out : offset + n_in * n_out + n_out]
+        y = work[layer + 1]
+        multiply_add(w, bias, work[layer], y, n_out, n_in, n_blocks)
+        if layer == bottleneck - 1:
+            for j in range(n_out):
+                for b in range(y.shape[1]):
+                    y[j, b] = one / (one + np.exp(-y[j, b]))
+        offset += n_in * n_out + n_out
+    return offset
+
+
 @numba.njit(**_FLAGS)
 def train_epoch(
     theta, accumulator, data, order, batch_size, lr, eps, sizes, bottleneck, work, x_t, grad, zeros
@@ -149,19 +170,7 @@ def train_epoch(
             r = order[start + b] if b < m else 0
             for i in range(n_inputs):
                 x0[i, b] = data[r, i] if b < m else 0.0
-        offset = 0
-        for layer in range(n_layers):
-            n_in = sizes[layer]
-            n_out = sizes[layer + 1]
-            w = theta[offset : offset + n_in * n_out].reshape((n_out, n_in))
-            bias = theta[offset + n_in * n_out : offset + n_in * n_out + n_out]
-            y = work[layer + 1]
-            multiply_add(w, bias, work[layer], y, n_out, n_in, n_blocks)
-            if layer == bottleneck - 1:
-                for j in range(n_out):
-                    for b in range(n_cols):
-                        y[j, b] = one / (one + np.exp(-y[j, b]))
-            offset += n_in * n_out + n_out
+        offset = forward(theta, sizes, n_layers, bottleneck, work, n_blocks)
         out = work[n_layers]
         g = work[n_layers + 1]
         g_in = work[n_layers + 2]
@@ -202,25 +211,17 @@ def encode_batch(theta, data, sizes, bottleneck, work, out):
     n_inputs = sizes[0]
     n_cols = work.shape[2]
     n_blocks = n_cols // LANES
-    one = np.float32(1.0)
     for start in range(0, n, n_cols):
         m = min(n_cols, n - start)
         x0 = work[0]
         for b in range(n_cols):
             for i in range(n_inputs):
                 x0[i, b] = data[start + b, i] if b < m else 0.0
-        offset = 0
-        for layer in range(bottleneck):
-            n_in = sizes[layer]
-            n_out = sizes[layer + 1]
-            w = theta[offset : offset + n_in * n_out].reshape((n_out, n_in))
-            bias = theta[offset + n_in * n_out : offset + n_in * n_out + n_out]
-            multiply_add(w, bias, work[layer], work[layer + 1], n_out, n_in, n_blocks)
-            offset += n_in * n_out + n_out
+        forward(theta, sizes, bottleneck, bottleneck, work, n_blocks)
         code = work[bottleneck]
         for b in range(m):
             for j in range(sizes[bottleneck]):
-                out[start + b, j] = one / (one + np.exp(-code[j, b]))
+                out[start + b, j] = code[j, b]
 
 
 def epoch_workspace(sizes: tuple[int, ...], batch_size: int) -> tuple[np.ndarray, ...]:

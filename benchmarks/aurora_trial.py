@@ -59,7 +59,7 @@ def fast_math_epoch():
     flags = {"fastmath": {"contract", "reassoc"}, "error_model": "numpy"}
     helper = {**flags, "_nrt": False, "forceinline": True, **aurora_kernel.NOALIAS}
     scope = dict(vars(aurora_kernel))  # the copies call each other through this namespace
-    for name in ("multiply_add", "input_gradient", "adagrad_layer"):
+    for name in ("multiply_add", "forward", "input_gradient", "adagrad_layer"):
         code = getattr(aurora_kernel, name).py_func.__code__
         scope[name] = numba.njit(**helper)(types.FunctionType(code, scope, name))
     code = aurora_kernel.train_epoch.py_func.__code__
