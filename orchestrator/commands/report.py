@@ -49,11 +49,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "For every approach and fitness two grids share (paper against legacy mode, "
             "two budgets, ...): each grid's median best loss, the difference and a "
-            "Mann–Whitney U test between the two, Holm-corrected per fitness."
+            "Mann–Whitney U test between the two, Holm-corrected per fitness. A grid is "
+            "its id in the store or the trials.csv of its report (docs/results/*/)."
         ),
     )
-    compare.add_argument("grid_a", help="the first grid id")
-    compare.add_argument("grid_b", help="the second grid id")
+    compare.add_argument("grid_a", help="the first grid: its id, or a report's trials.csv")
+    compare.add_argument("grid_b", help="the second grid: its id, or a report's trials.csv")
     _store_options(compare)
     compare.add_argument(
         "--out", type=Path, default=None, help="also write the table to this CSV (default: none)"
@@ -113,17 +114,23 @@ def handler(args: argparse.Namespace) -> int:
 def compare_handler(args: argparse.Namespace) -> int:
     """Prints the two grids' comparison table (and writes it as CSV with --out)."""
     from linkevo.orchestrator.report import GridNotFoundError
-    from linkevo.orchestrator.report.compare import compare_grids
+    from linkevo.orchestrator.report.compare import compare_grids, is_trials_csv
     from linkevo.workers.store.artifacts import write_text_atomic
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
+    uri = None
     for grid in (args.grid_a, args.grid_b):
-        if not layout.ID_PATTERN.fullmatch(grid):
+        if is_trials_csv(grid):
+            if not Path(grid).is_file():
+                raise CliError(f"trials table {grid!r} does not exist; allowed: a grid id or "
+                               "the trials.csv of a report")  # fmt: skip
+        elif not layout.ID_PATTERN.fullmatch(grid):
             raise CliError(f"grid id {grid!r} is invalid; allowed: letters, digits, '.', '_', '-'")
-    uri = require_store(resolve_tracking_uri(args.tracking_uri))
+        elif uri is None:
+            uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:
         table = compare_grids(uri, args.grid_a, args.grid_b, args.experiment)
-    except GridNotFoundError as exc:
+    except (GridNotFoundError, ValueError) as exc:
         raise CliError(str(exc)) from exc
     if table.empty:
         print(f"grids {args.grid_a} and {args.grid_b} share no finished approach and fitness")

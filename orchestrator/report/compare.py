@@ -1,4 +1,5 @@
-"""Provides `compare_grids`: two grids' best losses side by side, cell by cell."""
+"""Provides `compare_grids` and `compare_trials`: two grids' best losses side by side, cell
+by cell, from a store or from reports' `trials.csv`."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.load import load_grid
+from linkevo.orchestrator.report.load import finished_trials, load_grid
 from linkevo.orchestrator.report.stats import ALPHA, a12, holm, mann_whitney
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 
@@ -20,29 +21,59 @@ COLUMNS: tuple[str, ...] = (
 
 
 def compare_grids(
-    tracking_uri: str, grid_a: str, grid_b: str, experiment: str = "linkevo"
+    tracking_uri: str | None, grid_a: str, grid_b: str, experiment: str = "linkevo"
 ) -> pd.DataFrame:
-    """Returns one row per (fitness, approach) the two grids share: each grid's finished
-    trials and median best loss, the difference (b - a), and a two-sided Mann–Whitney U
-    of a against b (`stats.mann_whitney`), Holm-corrected over the approaches of one
-    fitness; A12 < 0.5 means grid a's losses tend to be lower.
+    """Returns `compare_trials` of two grids, each a grid id in the store or the path of a
+    report's `trials.csv` (a published grid compares without its store).
 
     Raises:
-        GridNotFoundError: when either grid is not in the store.
+        GridNotFoundError: when a grid is not in the store.
+        ValueError: when a trials table lacks the columns a report writes.
     """
     with tempfile.TemporaryDirectory(prefix="linkevo-compare-") as cache:
-        done = [
-            load_grid(tracking_uri, grid, Path(cache) / grid, experiment).finished()
+        a, b = (
+            finished_trials(read_trials_csv(grid))
+            if is_trials_csv(grid)
+            else load_grid(tracking_uri, grid, Path(cache) / grid, experiment).finished()
             for grid in (grid_a, grid_b)
-        ]
+        )
+    return compare_trials(a, b)
+
+
+def is_trials_csv(grid: str) -> bool:
+    """True when a grid argument names a report's trials table rather than a grid id."""
+    return grid.endswith(".csv")
+
+
+def read_trials_csv(path: str) -> pd.DataFrame:
+    """Returns a report's trials table.
+
+    Raises:
+        ValueError: naming the columns it lacks.
+    """
+    trials = pd.read_csv(path)
+    missing = [c for c in ("approach", "fitness", "status", "best_loss") if c not in trials]
+    if missing:
+        raise ValueError(
+            f"trials table {path!r} lacks the columns {', '.join(missing)}; allowed: the "
+            "trials.csv a report writes"
+        )
+    return trials
+
+
+def compare_trials(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
+    """Returns one row per (fitness, approach) two sets of finished trials share (columns
+    approach, fitness, best_loss): each one's trials and median best loss, the difference
+    (b - a), and a two-sided Mann–Whitney U of a against b (`stats.mann_whitney`),
+    Holm-corrected over the approaches of one fitness; A12 < 0.5 means a's losses tend to
+    be lower."""
     rows = []
-    for fitness in ordered(set(done[0].fitness) & set(done[1].fitness), FITNESSES):
-        shared = set(done[0].approach[done[0].fitness == fitness])
-        shared &= set(done[1].approach[done[1].fitness == fitness])
+    for fitness in ordered(set(a.fitness) & set(b.fitness), FITNESSES):
+        shared = set(a.approach[a.fitness == fitness]) & set(b.approach[b.fitness == fitness])
         for approach in ordered(shared, APPROACHES):
             x, y = (
                 d.best_loss[(d.fitness == fitness) & (d.approach == approach)].to_numpy()
-                for d in done
+                for d in (a, b)
             )
             u, p, method = mann_whitney(x, y)
             rows.append(

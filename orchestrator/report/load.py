@@ -72,8 +72,7 @@ class GridData:
 
     def finished(self) -> pd.DataFrame:
         """Returns the FINISHED trials with a best loss (the ones statistics use)."""
-        done = self.trials[(self.trials.status == "FINISHED") & self.trials.best_loss.notna()]
-        return done.reset_index(drop=True)
+        return finished_trials(self.trials)
 
     def approaches(self) -> list[str]:
         """Returns the grid's approaches in the study's order."""
@@ -82,6 +81,13 @@ class GridData:
     def fitnesses(self) -> list[str]:
         """Returns the grid's fitness functions in the study's order."""
         return ordered(self.trials.fitness.unique(), FITNESSES)
+
+
+def finished_trials(trials: pd.DataFrame) -> pd.DataFrame:
+    """Returns the FINISHED trials with a best loss of a trials table (a grid's, or a
+    report's `trials.csv`), the ones statistics use."""
+    done = trials[(trials.status == "FINISHED") & trials.best_loss.notna()]
+    return done.reset_index(drop=True)
 
 
 def in_study_order(

@@ -431,6 +431,28 @@ def test_compare_puts_two_grids_side_by_side(tmp_path, capsys):
     assert "nope" in capsys.readouterr().err
 
 
+def test_compare_reads_a_reports_trials_table(tmp_path, capsys):
+    """A published grid (its report's trials.csv) compares as its store would."""
+    first = write_grid(tmp_path / "a", GridSpec(grid_id="g0first", seed=1))
+    write_grid(tmp_path / "b", GridSpec(grid_id="g0second", seed=2), server_uri=first.uri)
+    from linkevo.orchestrator.report.compare import compare_grids
+
+    csv = tmp_path / "trials.csv"
+    load_grid(first.uri, "g0second", tmp_path / "cache").trials.to_csv(csv, index=False)
+    expected = compare_grids(first.uri, "g0first", "g0second")
+    pd.testing.assert_frame_equal(compare_grids(first.uri, "g0first", str(csv)), expected)
+    out = tmp_path / "cmp.csv"
+    assert (
+        main(["compare", "g0first", str(csv), "--tracking-uri", first.uri, "--out", str(out)]) == 0
+    )
+    assert pd.read_csv(out).p.to_numpy() == pytest.approx(expected.p.to_numpy())
+    assert main(["compare", str(csv), str(tmp_path / "none.csv")]) == 2
+    assert "none.csv' does not exist" in capsys.readouterr().err
+    pd.DataFrame({"approach": ["EA"]}).to_csv(tmp_path / "bad.csv", index=False)
+    assert main(["compare", str(csv), str(tmp_path / "bad.csv")]) == 2
+    assert "lacks the columns fitness, status, best_loss" in capsys.readouterr().err
+
+
 def test_a_report_that_fails_half_way_leaves_the_previous_one_whole(tmp_path, monkeypatch):
     from linkevo.orchestrator.report import build as report_build
 
