@@ -122,8 +122,10 @@ def compare_handler(args: argparse.Namespace) -> int:
     for grid in (args.grid_a, args.grid_b):
         if is_trials_csv(grid):
             if not Path(grid).is_file():
-                raise CliError(f"trials table {grid!r} does not exist; allowed: a grid id or "
-                               "the trials.csv of a report")  # fmt: skip
+                raise CliError(
+                    f"trials table {grid!r} does not exist; allowed: a grid id or the "
+                    "trials.csv of a report"
+                )
         elif not layout.ID_PATTERN.fullmatch(grid):
             raise CliError(f"grid id {grid!r} is invalid; allowed: letters, digits, '.', '_', '-'")
         elif uri is None:
