@@ -199,7 +199,9 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
     uri, runs = store
     run_id = runs["MAP-WH"]
     linkevo = Path(sys.executable).parent / "linkevo"
-    args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "1", "--floor", "flat",
+    # 4-s walks: on a quiet machine 1-s walks finished the map between the progress line and
+    # the signal's arrival
+    args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "4", "--floor", "flat",
             "--tracking-uri", uri]  # fmt: skip
     proc = subprocess.Popen([str(linkevo), *args], stderr=subprocess.PIPE)
     seen, deadline = b"", time.monotonic() + 120
