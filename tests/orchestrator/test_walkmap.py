@@ -203,7 +203,13 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
     # the signal's arrival
     args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "4", "--floor", "flat",
             "--tracking-uri", uri]  # fmt: skip
-    proc = subprocess.Popen([str(linkevo), *args], stderr=subprocess.PIPE)
+    # An ignored SIGINT is inherited across exec; the walk map's Ctrl-C is what is tested, so
+    # the command starts with the default disposition whatever an earlier test left here.
+    proc = subprocess.Popen(
+        [str(linkevo), *args],
+        stderr=subprocess.PIPE,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
     seen, deadline = b"", time.monotonic() + 120
     while not re.search(rb"\| ([1-9]|\d\d)/30 ", seen):  # walks done, most still to do
         assert time.monotonic() < deadline and proc.poll() is None, seen.decode()[-500:]
