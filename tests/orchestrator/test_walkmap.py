@@ -199,9 +199,7 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
     uri, runs = store
     run_id = runs["MAP-WH"]
     linkevo = Path(sys.executable).parent / "linkevo"
-    # 4-s walks: on a quiet machine 1-s walks finished the map between the progress line and
-    # the signal's arrival
-    args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "4", "--floor", "flat",
+    args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "1", "--floor", "flat",
             "--tracking-uri", uri]  # fmt: skip
     # An ignored SIGINT is inherited across exec; the walk map's Ctrl-C is what is tested, so
     # the command starts with the default disposition whatever an earlier test left here.
