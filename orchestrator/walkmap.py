@@ -1,5 +1,7 @@
-"""Provides `walk_maps`: every chosen cell of a repertoire walked on the simulated robot,
-on each floor, fanned out over Ray in batches of cells (`linkevo walkmap`).
+"""Provides `walk_map`: every chosen cell of a repertoire walked on the simulated robot,
+on each floor, fanned out over Ray (`linkevo walkmap`) in two steps: the cells' legs built
+in batches of cells, then each distinct leg walked once, in batches of legs
+(`sim.walk_map`).
 
 The result is the trial's `walkmap.parquet` (a row per cell and floor: `sim.walk_map.COLUMNS`
 and the cell's bins) and `walkmap.png` (distance per cell, a panel per floor), logged to
@@ -15,6 +17,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -22,13 +25,24 @@ import pandas as pd
 from linkevo.orchestrator.explore import TrialRun
 from linkevo.sim import decode, simulate
 from linkevo.sim.physical import physical_checks
-from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_cells
+from linkevo.sim.walk_map import (
+    COLUMNS,
+    CellBatch,
+    LegBatch,
+    LegToWalk,
+    build_cells,
+    group_legs,
+    rows_for_cells,
+    walk_legs,
+)
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 
-BATCH_CELLS = 4
-"""Cells per task: a task walks them on every floor (about 4 s of work on one core), small
-enough that the tasks of one repertoire spread evenly over the workers."""
+BATCH_CELLS = 8
+"""Cells per build task (about 1 s of work on one core)."""
+BATCH_LEGS = 4
+"""Distinct legs per walk task: a task walks them on every floor (about 2 s of work on one
+core), small enough that the tasks of one repertoire spread evenly over the workers."""
 CHECKPOINT_S = 30.0
 """How often the rows walked so far are logged to the trial's run."""
 SELECTIONS = ("buildable", "all", "best:K")
@@ -105,35 +119,77 @@ def plan(
     return out
 
 
-def run_in_process(batches: list[CellBatch]) -> Iterator[list[dict]]:
-    """Yields each batch's rows, walked here one after another."""
-    for batch in batches:
-        yield walk_cells(batch)
+def leg_batches(legs: list[LegToWalk], seconds: float) -> list[LegBatch]:
+    """Returns the walk tasks of distinct legs (`sim.walk_map.group_legs`), `BATCH_LEGS`
+    legs on the same floors each; a leg is named by its index in `legs`."""
+    by_floors: dict[tuple[str, ...], list[int]] = {}
+    for i, leg in enumerate(legs):
+        by_floors.setdefault(leg.floors, []).append(i)
+    out = []
+    for floors, index in by_floors.items():
+        for start in range(0, len(index), BATCH_LEGS):
+            named = {str(i): legs[i].recipe for i in index[start : start + BATCH_LEGS]}
+            out.append(LegBatch(named, floors, seconds))
+    return out
 
 
-def _walk_on_one_core(batch: CellBatch) -> list[dict]:
-    """`walk_cells` in a task that holds one CPU: numba's and BLAS's thread pools kept to
+def walk_rows(
+    run: Runner, batches: list[CellBatch], seconds: float
+) -> Iterator[tuple[int, list[dict]]]:
+    """Yields, as each task ends, how many cells it built and the rows it settled: while
+    the legs are built, the rows of the cells that are not walked; then each distinct
+    leg's walks as the rows of every cell that builds it.
+
+    Args:
+        run: runs the build and walk tasks (`run_in_process`, or `run_on_ray` bound to a
+            cluster).
+        batches: the cells (`plan`).
+        seconds: each walk's length.
+    """
+    built = []
+    for cells in run(build_cells, batches):
+        yield len(cells), [r for b in cells for r in b.rows]
+        built += [b for b in cells if b.recipe is not None]
+    legs = group_legs(built)
+    for walked in run(walk_legs, leg_batches(legs, seconds)):
+        for name, leg_rows in walked.items():
+            yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
+
+
+Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
+"""Runs a function over items and yields each result as it ends: `run_in_process`, or
+`run_on_ray` bound to a cluster."""
+
+
+def run_in_process(work: Callable[[Any], Any], items: list) -> Iterator[Any]:
+    """Yields `work(item)` for each item, here, one after another."""
+    for item in items:
+        yield work(item)
+
+
+def _on_one_core(work: Callable[[Any], Any], item: Any) -> Any:
+    """`work(item)` in a task that holds one CPU: numba's and BLAS's thread pools kept to
     one thread, so tasks side by side do not compete for cores."""
     import numba
     from threadpoolctl import threadpool_limits
 
     numba.set_num_threads(1)
     with threadpool_limits(1):
-        return walk_cells(batch)
+        return work(item)
 
 
-def run_on_ray(batches: list[CellBatch], in_flight: int) -> Iterator[list[dict]]:
-    """Yields each batch's rows as its Ray task ends (one CPU per task, at most
+def run_on_ray(work: Callable[[Any], Any], items: list, in_flight: int) -> Iterator[Any]:
+    """Yields `work(item)` for each item as its Ray task ends (one CPU per task, at most
     `in_flight` tasks submitted at a time so an interruption leaves little running)."""
     import ray
 
-    task = ray.remote(num_cpus=1, max_retries=2)(_walk_on_one_core)
-    pending = list(batches)
+    task = ray.remote(num_cpus=1, max_retries=2)(_on_one_core)
+    pending = list(items)
     running: list = []
     try:
         while pending or running:
             while pending and len(running) < in_flight:
-                running.append(task.remote(pending.pop(0)))
+                running.append(task.remote(work, pending.pop(0)))
             ready, running = ray.wait(running, num_returns=1)
             yield ray.get(ready[0])
     finally:
@@ -157,22 +213,24 @@ def refuse_overwrite(client, trial: TrialRun, resume: bool) -> None:
 def walk_map(
     client,
     trial: TrialRun,
-    rows_of: Callable[[list[CellBatch]], Iterable[list[dict]]],
+    run: Runner,
     *,
     floors: tuple[str, ...],
     selection: Selection,
     resume: bool,
     seconds: float,
-    tick: Callable[[int, int], None] | None = None,
+    tick: Callable[[str, int, int], None] | None = None,
 ) -> pd.DataFrame:
     """Walks one repertoire trial's chosen cells and logs its walk map; returns it.
 
     Args:
-        rows_of: runs the batches (`run_in_process`, or `run_on_ray` bound to a cluster)
-            and yields each batch's rows.
+        run: runs the build and walk tasks (`run_in_process`, or `run_on_ray` bound to a
+            cluster).
         resume: complete the map the run already has (without it, a run that has one is
             refused, so nothing is overwritten unasked).
-        tick: called with (pairs walked, pairs to walk) as batches end.
+        tick: called as tasks end with ("building legs", cells built, cells), then with
+            ("walking", pairs done, pairs); a (cell, floor) pair is done when its row is
+            known (a cell that is not walked, as it is built).
 
     Raises:
         WalkMapError: the run has a walk map and `resume` is off.
@@ -195,13 +253,16 @@ def walk_map(
         )
         rows: list[dict] = []
         total = sum(len(b.cells) * len(b.floors) for b in batches)
-        walked, last = 0, time.monotonic()
+        cells, built = sum(len(b.cells) for b in batches), 0
+        last = time.monotonic()
         try:
-            for batch_rows in rows_of(batches):
-                rows += batch_rows
-                walked += len(batch_rows)
-                if tick is not None:
-                    tick(walked, total)
+            for n_built, new_rows in walk_rows(run, batches, seconds):
+                rows += new_rows
+                built += n_built
+                if tick is not None and built < cells:
+                    tick("building legs", built, cells)
+                elif tick is not None:
+                    tick("walking", len(rows), total)
                 if time.monotonic() - last > CHECKPOINT_S:
                     _log(client, trial, table, kept, rows, Path(tmp), picture=False)
                     last = time.monotonic()

@@ -14,6 +14,7 @@ conflicting beams never share one, merged beams share theirs, layers are used in
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,11 +80,21 @@ def crossing_pairs(batch: LinkageBatch, motion: Motion, i: int = 0) -> np.ndarra
 def min_layers(n_items: int, conflicts: np.ndarray, same: np.ndarray | None = None) -> np.ndarray:
     """Returns (n_items,) int64 layers using the fewest layers such that no conflicting
     pair (K, 2) shares one and every `same` pair (M, 2) does (an exact graph colouring,
-    `scipy.optimize.milp`)."""
+    `scipy.optimize.milp`). Repertoire neighbours often share a graph, so colourings are
+    cached by graph (the solve is most of a leg's layer plan)."""
     conflicts = np.asarray(conflicts, dtype=np.int64).reshape(-1, 2)
     same = np.zeros((0, 2), np.int64) if same is None else np.asarray(same, np.int64).reshape(-1, 2)
+    key = (n_items, tuple(map(tuple, conflicts.tolist())), tuple(map(tuple, same.tolist())))
+    return np.array(_colouring(*key), dtype=np.int64)
+
+
+@functools.lru_cache(maxsize=4096)
+def _colouring(
+    n_items: int, conflicts: tuple[tuple[int, int], ...], same: tuple[tuple[int, int], ...]
+) -> tuple[int, ...]:
+    """`min_layers` on a hashable graph: the layer of each item."""
     if n_items == 0:
-        return np.zeros(0, dtype=np.int64)
+        return ()
     n_layers = n_items  # an upper bound: every item on its own layer
     nx = n_items * n_layers  # x[b, l] at b * n_layers + l, then y[l]
     rows, bounds_low, bounds_high = [], [], []
@@ -119,7 +130,7 @@ def min_layers(n_items: int, conflicts: np.ndarray, same: np.ndarray | None = No
     if not result.success:
         raise ValueError(f"no layer plan: a merged pair also conflicts ({result.message})")
     x = np.round(result.x[:nx]).reshape(n_items, n_layers)
-    return x.argmax(axis=1).astype(np.int64)
+    return tuple(int(v) for v in x.argmax(axis=1))
 
 
 def layer_plan(batch: LinkageBatch, motion: Motion, i: int = 0) -> LayerPlan:

@@ -4,14 +4,15 @@ and the layer of every beam."""
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 
 import numpy as np
 
-from linkevo.sim.decode import NODE_KINDS, decode
+from linkevo.sim.decode import NODE_KINDS, LinkageBatch, decode
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.layers import layer_plan
-from linkevo.sim.lego import QuantiseError, quantise
+from linkevo.sim.lego import QuantiseError, whole_module_build
 from linkevo.sim.study import DEFAULT_ANGLES
 
 POSE_ANGLES = 360
@@ -82,6 +83,56 @@ class Leg:
         return float(x.max() - x.min())
 
 
+@dataclass(frozen=True)
+class LegRecipe:
+    """What fixes a leg: its linkage (one decoded row: the LEGO build, or the linkage as
+    evolved) and each beam's layer, with a digest of the leg it makes. Cells whose recipes
+    have one key have one leg (its poses, beams, parts, layers, frame and foot), so a walk
+    map walks it once.
+
+    Attributes:
+        batch: the linkage, one row.
+        layer: (B,) int64 each beam's layer (`sim.layers.layer_plan`).
+        note: why the leg is as evolved, or "" for a LEGO build.
+        key: the digest of the leg.
+    """
+
+    batch: LinkageBatch
+    layer: np.ndarray
+    note: str
+    key: str
+
+    def leg(self) -> Leg:
+        """Returns the leg (its poses simulated at `POSE_ANGLES` crank angles)."""
+        return _leg(self.batch, simulate(self.batch, POSE_ANGLES), self.layer, self.note)
+
+
+def _leg(batch: LinkageBatch, motion, layer: np.ndarray, note: str) -> Leg:
+    """The leg of a one-row linkage, its motion at `POSE_ANGLES` and its beams' layers."""
+    n_beams = int(batch.n_beams[0])
+    beams = batch.beam_int[0, :n_beams, :2].astype(np.int64)
+    kinds = [NODE_KINDS[int(k)] for k in batch.node_int[0, :, 0]]
+    frame_nodes = [j for j, kind in enumerate(kinds) if kind in ("motor", "static")]
+    return Leg(
+        paths=motion.positions[0],
+        beams=beams,
+        part=rigid_parts(batch.node_int[0], beams, frame_nodes),
+        layer=layer,
+        frame_nodes=np.array(frame_nodes, dtype=np.int64),
+        foot=int(motion.foot[0]),
+        built=not note,
+        note=note,
+    )
+
+
+def _digest(leg: Leg) -> str:
+    """A digest of everything a walk reads of a leg."""
+    digest = hashlib.sha1(f"{leg.foot} {leg.built}".encode())
+    for array in (leg.paths, leg.beams, leg.part, leg.layer, leg.frame_nodes):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
 def leg_from_genome(genome: np.ndarray, mode: str = "paper") -> Leg:
     """Returns the leg of a genome: its LEGO build (as `linkevo pull` makes it) where a
     whole-module rounding turns, else the linkage as evolved.
@@ -93,35 +144,31 @@ def leg_from_genome(genome: np.ndarray, mode: str = "paper") -> Leg:
     Raises:
         LegError: when the linkage (as built and as evolved) does not turn a full turn.
     """
+    return _recipe_and_leg(genome, mode)[1]
+
+
+def leg_recipe(genome: np.ndarray, mode: str = "paper") -> LegRecipe:
+    """Returns the recipe of `leg_from_genome`'s leg; raises as it does."""
+    return _recipe_and_leg(genome, mode)[0]
+
+
+def _recipe_and_leg(genome: np.ndarray, mode: str) -> tuple[LegRecipe, Leg]:
     genome = np.asarray(genome, dtype=np.float64).reshape(1, -1)
     note = ""
     try:
-        batch = quantise(genome[0], mode).batch
+        batch = whole_module_build(genome[0], mode)
     except QuantiseError as exc:
         batch, note = decode(genome, mode), f"walked as evolved: {exc}"
     motion = simulate(batch, POSE_ANGLES)
-    if not motion.valid[0].all():
-        failed = int((~motion.valid[0]).sum())
+    valid = motion.valid[0]
+    if not valid.all():
         raise LegError(
-            f"the linkage does not turn a full turn: it fails to assemble at {failed} of "
-            f"{POSE_ANGLES} crank angles, so no robot can walk on it"
+            f"the linkage does not turn a full turn: it fails to assemble at "
+            f"{int((~valid).sum())} of {POSE_ANGLES} crank angles, so no robot can walk on it"
         )
-    n_beams = int(batch.n_beams[0])
-    beams = batch.beam_int[0, :n_beams, :2].astype(np.int64)
-    kinds = [NODE_KINDS[int(k)] for k in batch.node_int[0, :, 0]]
-    frame_nodes = [j for j, kind in enumerate(kinds) if kind in ("motor", "static")]
-    part = rigid_parts(batch.node_int[0], beams, frame_nodes)
-    plan = layer_plan(batch, simulate(batch, DEFAULT_ANGLES))
-    return Leg(
-        paths=motion.positions[0],
-        beams=beams,
-        part=part,
-        layer=plan.layer,
-        frame_nodes=np.array(frame_nodes, dtype=np.int64),
-        foot=int(motion.foot[0]),
-        built=not note,
-        note=note,
-    )
+    layer = layer_plan(batch, simulate(batch, DEFAULT_ANGLES)).layer
+    leg = _leg(batch, motion, layer, note)
+    return LegRecipe(batch=batch, layer=layer, note=note, key=_digest(leg)), leg
 
 
 def rigid_parts(node_int: np.ndarray, beams: np.ndarray, frame_nodes: list[int]) -> np.ndarray:

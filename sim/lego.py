@@ -85,6 +85,56 @@ def quantise(
     Raises:
         QuantiseError: when no rounding turns fully without stretching a beam.
     """
+    found = _closest_rounding(genome, mode, n_angles)
+    seen = found.here.valid[0]
+    x0, y0 = _foot_path(found.here, 0)
+    x, y = _foot_path(found.motion, 0)
+    return Quantised(
+        lengths=found.lengths,
+        original=found.original,
+        batch=found.batch,
+        motion=found.motion,
+        checks=physical_checks(found.batch, found.motion),
+        foot_x=x,
+        foot_y=y,
+        original_x=x0,
+        original_y=y0,
+        mean_shift=found.mean_shift,
+        max_shift=float(np.max(np.hypot(x - x0, y - y0)[seen])),
+        loss=_loss(genome, mode, fitness, n_angles, found.lengths),
+        original_loss=_loss(genome, mode, fitness, n_angles, None),
+        roundings=found.roundings,
+        feasible=found.feasible,
+    )
+
+
+def whole_module_build(genome: np.ndarray, mode: str = "paper") -> LinkageBatch:
+    """Returns the linkage `quantise` builds (one row), without the sheet's figures.
+
+    Raises:
+        QuantiseError: as `quantise`.
+    """
+    return _closest_rounding(genome, mode, DEFAULT_ANGLES).batch
+
+
+@dataclass(frozen=True)
+class _Rounding:
+    """The closest rounding that turns: its lengths (B,), batch and motion (one row), the
+    original's lengths and motion, the mean foot-path shift, and the search's counts."""
+
+    lengths: np.ndarray
+    batch: LinkageBatch
+    motion: Motion
+    original: np.ndarray
+    here: Motion
+    mean_shift: float
+    roundings: int
+    feasible: int
+
+
+def _closest_rounding(genome: np.ndarray, mode: str, n_angles: int) -> _Rounding:
+    """Simulates every whole-module rounding of the linkage and returns the one that turns
+    with rigid beams and keeps the foot path closest (`QuantiseError` when none does)."""
     base = decode(np.asarray(genome, dtype=np.float64).reshape(1, -1), mode)
     here = simulate(base, n_angles)
     n_beams = int(base.n_beams[0])
@@ -112,23 +162,14 @@ def quantise(
     shifts = np.hypot(feet[:, :, 0] - x0[seen], feet[:, :, 1] - y0[seen]).mean(axis=1)
     shifts = np.where(ok, shifts, np.inf)
     best = int(np.argmin(shifts))  # ties: the first rounding in product order
-    x, y = _foot_path(motion, best)
     one = _with_lengths(base, combos[best : best + 1])
-    built = simulate(one, n_angles)
-    return Quantised(
+    return _Rounding(
         lengths=combos[best],
-        original=original,
         batch=one,
-        motion=built,
-        checks=physical_checks(one, built),
-        foot_x=x,
-        foot_y=y,
-        original_x=x0,
-        original_y=y0,
+        motion=simulate(one, n_angles),
+        original=original,
+        here=here,
         mean_shift=float(shifts[best]),
-        max_shift=float(np.max(np.hypot(x - x0, y - y0)[seen])),
-        loss=_loss(genome, mode, fitness, n_angles, combos[best]),
-        original_loss=_loss(genome, mode, fitness, n_angles, None),
         roundings=len(combos),
         feasible=int(ok.sum()),
     )

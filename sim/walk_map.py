@@ -1,25 +1,35 @@
-"""Provides `walk_cells`: a batch of repertoire cells walked on the simulated robot, one
-walk per cell and floor (the walk map's protocol).
+"""Provides the walk map's two steps: `build_cells` (each repertoire cell's leg, or the row
+that says why it is not walked) and `walk_legs` (each distinct leg walked once per floor),
+and `walk_cells`, the two in one process.
 
 A walk-map walk is the Table I protocol's walk (`sim.walk.walk` on the lean model) once,
-from the unperturbed start, instead of five times from hand-placed starts: repeats of one
-linkage agree within a centimetre or two except where a robot breaks (docs/walking.md), so
-one walk ranks the cells of a map as the five do, at a fifth of the cost.
+from the unperturbed start, instead of five times from hand-placed starts, at twice the
+physics step and with the sparse constraint Jacobian (the same walk to rounding). Repeats
+of one linkage agree within a centimetre or two except where a robot breaks, and the
+coarser step moves a distance by a few millimetres in the median (docs/walking.md), so one
+such walk ranks the cells of a map as Table I's five do, at an eighth of the cost.
+Neighbouring cells often round to the same LEGO build (a quarter of a study repertoire's
+legs repeat one another's), and the walk is deterministic, so each distinct leg
+(`LegRecipe.key`) is walked once and its rows are every such cell's.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from linkevo.sim.leg import LegError, leg_from_genome
+from linkevo.sim.leg import LegError, LegRecipe, leg_recipe
 from linkevo.sim.robot import FLOORS
 from linkevo.sim.walk import WalkSettings, walk
 
 WALK_SECONDS = 10.0
 """A walk-map walk's length, as Table I's."""
+WALK_MAP_STEP_S = 0.004
+"""A walk-map walk's physics step, twice Table I's: it ranks cells as Table I's walks do
+(docs/walking.md) at about 60 % of the cost; a walk that blows up is walked again at half
+the step, as every walk is."""
 COLUMNS = (
     "cell",
     "floor",
@@ -50,34 +60,78 @@ class CellBatch:
     seconds: float = WALK_SECONDS
 
 
-def walk_cells(batch: CellBatch) -> list[dict]:
-    """Returns a row (`COLUMNS`) per cell and floor of the batch.
+@dataclass(frozen=True)
+class BuiltCell:
+    """A cell after its leg's build: the `recipe` of the leg to walk on `floors`, or, when
+    it is not walked, its rows (it breaks without walking, is not buildable, or failed)."""
+
+    cell: int
+    floors: tuple[str, ...]
+    recipe: LegRecipe | None = None
+    rows: list[dict] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class LegBatch:
+    """Distinct legs to walk on the same floors: their recipes, by the caller's name for
+    each."""
+
+    recipes: dict[str, LegRecipe]
+    floors: tuple[str, ...]
+    seconds: float = WALK_SECONDS
+
+
+def walk_map_settings(seconds: float = WALK_SECONDS) -> WalkSettings:
+    """Returns how a walk-map walk is simulated: the lean model at `WALK_MAP_STEP_S`, with
+    the sparse constraint Jacobian."""
+    return WalkSettings(seconds=seconds, timestep=WALK_MAP_STEP_S, sparse=True)
+
+
+def build_cells(batch: CellBatch) -> list[BuiltCell]:
+    """Returns each cell of the batch built: its leg's recipe, or its rows.
 
     A cell is walked as its LEGO build; when no whole-module rounding of it turns it is
     "not buildable" and walked as evolved only with `batch.as_evolved`. A linkage that
     does not turn a full turn breaks without being walked. Any other error is recorded as
     the cell's "failed" row with its message, and the batch goes on.
     """
-    rows = []
-    settings = WalkSettings(seconds=batch.seconds)
+    out = []
     for cell, genome in zip(batch.cells, batch.genomes, strict=True):
         base = {"cell": int(cell), "seconds": float(batch.seconds)}
+        recipe, rows = None, []
         try:
-            leg = leg_from_genome(genome, batch.mode)
+            recipe = leg_recipe(genome, batch.mode)
         except LegError as exc:
-            rows += [_row(base, f, "walked", breaks=True, reason=str(exc)) for f in batch.floors]
-            continue
+            rows = [_row(base, f, "walked", breaks=True, reason=str(exc)) for f in batch.floors]
         except Exception as exc:  # recorded per cell, the batch goes on
-            rows += [_row(base, f, "failed", reason=_error(exc)) for f in batch.floors]
+            rows = [_row(base, f, "failed", reason=_error(exc)) for f in batch.floors]
+        if recipe is not None and recipe.note and not batch.as_evolved:
+            rows = [_row(base, f, "not buildable", reason=recipe.note) for f in batch.floors]
+            recipe = None
+        out.append(BuiltCell(int(cell), batch.floors, recipe=recipe, rows=rows))
+    return out
+
+
+def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
+    """Returns each leg's rows (one per floor, `cell` -1 until a cell takes them), by name.
+
+    A walk that raises is recorded as that floor's "failed" row with the error.
+    """
+    settings = walk_map_settings(batch.seconds)
+    out = {}
+    for key, recipe in batch.recipes.items():
+        base = {"cell": -1, "seconds": float(batch.seconds)}
+        kind = "as evolved" if recipe.note else "LEGO build"
+        try:
+            leg = recipe.leg()
+        except Exception as exc:  # recorded per leg, the batch goes on
+            out[key] = [_row(base, f, "failed", reason=_error(exc), leg=kind) for f in batch.floors]
             continue
-        if not leg.built and not batch.as_evolved:
-            rows += [_row(base, f, "not buildable", reason=leg.note) for f in batch.floors]
-            continue
-        kind = "LEGO build" if leg.built else "as evolved"
+        rows = []
         for floor in batch.floors:
             try:
                 w = walk(leg, FLOORS[floor], settings=settings)
-            except Exception as exc:  # recorded per cell and floor
+            except Exception as exc:  # recorded per leg and floor
                 rows.append(_row(base, floor, "failed", reason=_error(exc), leg=kind))
                 continue
             rows.append(
@@ -94,7 +148,47 @@ def walk_cells(batch: CellBatch) -> list[dict]:
                     pins=w.pin_force_n[2],
                 )
             )
-    return rows
+        out[key] = rows
+    return out
+
+
+@dataclass(frozen=True)
+class LegToWalk:
+    """A distinct leg to walk once on `floors`, and the cells whose rows its walk is."""
+
+    recipe: LegRecipe
+    floors: tuple[str, ...]
+    cells: list[int]
+
+
+def group_legs(built: list[BuiltCell]) -> list[LegToWalk]:
+    """Returns the built cells' distinct legs (by recipe key and floors), each with its
+    cells."""
+    groups: dict[tuple[str, tuple[str, ...]], LegToWalk] = {}
+    for b in built:
+        if b.recipe is not None:
+            key = (b.recipe.key, b.floors)
+            groups.setdefault(key, LegToWalk(b.recipe, b.floors, [])).cells.append(b.cell)
+    return list(groups.values())
+
+
+def rows_for_cells(rows: list[dict], cells: list[int]) -> list[dict]:
+    """Returns a leg's rows (`walk_legs`) as every cell's that builds it."""
+    return [{**row, "cell": int(cell)} for cell in cells for row in rows]
+
+
+def walk_cells(batch: CellBatch) -> list[dict]:
+    """Returns a row (`COLUMNS`) per cell and floor of the batch: `build_cells`, then each
+    distinct leg walked once (`walk_legs`), in this process."""
+    built = build_cells(batch)
+    rows = [r for b in built for r in b.rows]
+    legs = group_legs(built)
+    recipes = {str(i): leg.recipe for i, leg in enumerate(legs)}
+    walked = walk_legs(LegBatch(recipes, batch.floors, batch.seconds))
+    for name, leg_rows in walked.items():
+        rows += rows_for_cells(leg_rows, legs[int(name)].cells)
+    cell_order = {int(c): i for i, c in enumerate(batch.cells)}
+    return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))
 
 
 def _row(

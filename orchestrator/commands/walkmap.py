@@ -94,9 +94,14 @@ def handle(args: argparse.Namespace) -> int:
     previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does
     try:
         for trial in trials:
-            bar = tqdm(desc=f"walkmap {trial.trial_key}", unit="walk", file=sys.stderr)
+            bar = tqdm(desc=f"walkmap {trial.trial_key}", unit="cell", file=sys.stderr)
 
-            def tick(done: int, total: int, bar=bar) -> None:
+            def tick(step: str, done: int, total: int, bar=bar, key=trial.trial_key) -> None:
+                label = f"walkmap {key}: {step}"
+                if bar.desc != label:  # a new step: its own count and rate
+                    bar.set_description_str(label, refresh=False)  # drawn by the reset
+                    bar.unit = "cell" if step == "building legs" else "walk"
+                    bar.reset(total)
                 bar.total = total
                 bar.n = done
                 bar.refresh()
@@ -105,7 +110,7 @@ def handle(args: argparse.Namespace) -> int:
                 frame = walk_map(
                     client,
                     trial,
-                    lambda batches: run_on_ray(batches, in_flight),
+                    lambda work, items: run_on_ray(work, items, in_flight),
                     floors=floors,
                     selection=selection,
                     resume=args.resume,

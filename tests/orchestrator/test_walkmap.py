@@ -15,6 +15,7 @@ from mlflow.tracking import MlflowClient
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.explore import trial_run
 from linkevo.orchestrator.walkmap import Selection, run_in_process, walk_map
+from linkevo.sim.walk_map import build_cells
 from linkevo.workers.store.linkages import repertoire
 from linkevo.workers.trial import TrialSpec
 from tests.helpers.browser import chromium
@@ -104,9 +105,10 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
     client = MlflowClient(uri)
     walked_now: list[int] = []
 
-    def counted(batches):
-        walked_now.extend(int(c) for b in batches for c in b.cells)
-        return run_in_process(batches)
+    def counted(work, items):
+        if work is build_cells:
+            walked_now.extend(int(c) for b in items for c in b.cells)
+        return run_in_process(work, items)
 
     after = walk_map(
         client, trial_run(client, run_id), counted, floors=("flat", "carpet"),
@@ -209,7 +211,7 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     seen, deadline = b"", time.monotonic() + 120
-    while not re.search(rb"\| ([1-9]|\d\d)/30 ", seen):  # walks done, most still to do
+    while not re.search(rb"walking: .*\| ([1-9]|\d\d)/30 ", seen):  # walks done, most to do
         assert time.monotonic() < deadline and proc.poll() is None, seen.decode()[-500:]
         if select.select([proc.stderr], [], [], 0.5)[0]:
             seen += proc.stderr.read1(4096)

@@ -59,6 +59,16 @@ def test_the_same_seed_gives_the_same_distance_and_another_seed_another(evolved)
     assert other.distance_m != first.distance_m
 
 
+def test_the_sparse_jacobian_walks_as_the_dense_one(evolved):
+    dense = walk(evolved, FLOORS["flat"], settings=SHORT)
+    sparse = walk(evolved, FLOORS["flat"], settings=dataclasses.replace(SHORT, sparse=True))
+    assert sparse.model.opt.jacobian == mujoco.mjtJacobian.mjJAC_SPARSE
+    assert dense.model.opt.jacobian == mujoco.mjtJacobian.mjJAC_DENSE
+    assert sparse.distance_m == pytest.approx(dense.distance_m, abs=1e-6)
+    assert sparse.pin_force_n[2] == pytest.approx(dense.pin_force_n[2], rel=1e-6)
+    assert sparse.breaks == dense.breaks
+
+
 @pytest.mark.parametrize("model", ["lean", "full"])
 @pytest.mark.parametrize("floor", ["flat", "carpet"])
 def test_loops_stay_closed_and_no_walk_beats_the_no_slip_bound(jansen, evolved, floor, model):

@@ -1,5 +1,6 @@
 """The walk map's protocol on the real engine: one walk per cell and floor ranks cells as
-the Table I protocol (five perturbed walks) does, and a bad cell is recorded, not fatal."""
+the Table I protocol (five perturbed walks) does, cells that build the same leg share one
+walk, and a bad cell is recorded, not fatal."""
 
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from linkevo.sim.genome import random_genomes
 from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.robot import FLOORS
 from linkevo.sim.walk import WalkSettings, field_trials
-from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_cells
+from linkevo.sim.walk_map import COLUMNS, CellBatch, build_cells, group_legs, walk_cells
 
 SECONDS = 4.0
 
@@ -71,3 +72,23 @@ def test_a_cell_that_cannot_be_walked_is_recorded_and_the_batch_goes_on():
         assert "gene 0 is nan" in failed["reason"]
         assert by_cell[(8, floor)]["status"] == "walked"
         assert np.isfinite(by_cell[(8, floor)]["mean_distance_cm"])
+
+
+def test_cells_that_build_the_same_leg_share_one_walk():
+    genome = built_genomes(1)[0]
+    nudged = genome + 1e-9  # the same whole-module rounding, another genome
+    other = built_genomes(2)[1]
+    batch = CellBatch(np.array([3, 4, 5]), np.vstack([genome, nudged, other]), "paper",
+                      ("flat", "carpet"), seconds=1.0)  # fmt: skip
+    legs = group_legs(build_cells(batch))
+    assert sorted(sorted(leg.cells) for leg in legs) == [[3, 4], [5]]
+    rows = walk_cells(batch)
+    assert [(r["cell"], r["floor"]) for r in rows] == [
+        (c, f) for c in (3, 4, 5) for f in ("flat", "carpet")
+    ]
+    by_cell = {(r["cell"], r["floor"]): r for r in rows}
+    for floor in ("flat", "carpet"):
+        shared = {k: v for k, v in by_cell[(3, floor)].items() if k != "cell"}
+        assert shared == {k: v for k, v in by_cell[(4, floor)].items() if k != "cell"}
+        assert by_cell[(3, floor)]["status"] == "walked"
+        assert by_cell[(5, floor)]["mean_distance_cm"] != by_cell[(3, floor)]["mean_distance_cm"]
