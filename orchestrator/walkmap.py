@@ -119,6 +119,11 @@ def plan(
     return out
 
 
+Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
+"""Runs a function over items and yields each result as it ends: `run_in_process`, or
+`run_on_ray` bound to a cluster."""
+
+
 def leg_batches(legs: list[LegToWalk], seconds: float) -> list[LegBatch]:
     """Returns the walk tasks of distinct legs (`sim.walk_map.group_legs`), `BATCH_LEGS`
     legs on the same floors each; a leg is named by its index in `legs`."""
@@ -154,11 +159,6 @@ def walk_rows(
     for walked in run(walk_legs, leg_batches(legs, seconds)):
         for name, leg_rows in walked.items():
             yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
-
-
-Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
-"""Runs a function over items and yields each result as it ends: `run_in_process`, or
-`run_on_ray` bound to a cluster."""
 
 
 def run_in_process(work: Callable[[Any], Any], items: list) -> Iterator[Any]:

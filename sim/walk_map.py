@@ -8,8 +8,8 @@ physics step and with the sparse constraint Jacobian (the same walk to rounding)
 of one linkage agree within a centimetre or two except where a robot breaks, and the
 coarser step moves a distance by a few millimetres in the median (docs/walking.md), so one
 such walk ranks the cells of a map as Table I's five do, at an eighth of the cost.
-Neighbouring cells often round to the same LEGO build (a quarter of a study repertoire's
-legs repeat one another's), and the walk is deterministic, so each distinct leg
+Neighbouring cells often round to the same LEGO build (the 7,514 walked cells of a study
+repertoire have 5,202 distinct legs), and the walk is deterministic, so each distinct leg
 (`LegRecipe.key`) is walked once and its rows are every such cell's.
 """
 

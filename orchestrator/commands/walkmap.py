@@ -102,6 +102,7 @@ def handle(args: argparse.Namespace) -> int:
                     bar.set_description_str(label, refresh=False)  # drawn by the reset
                     bar.unit = "cell" if step == "building legs" else "walk"
                     bar.reset(total)
+                    bar.initial = done  # the rate counts what this step does
                 bar.total = total
                 bar.n = done
                 bar.refresh()
