@@ -39,7 +39,7 @@ from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 
 BATCH_CELLS = 8
-"""Cells per build task (about 1 s of work on one core)."""
+"""Cells per build task (1-2 s of work on one core)."""
 BATCH_LEGS = 4
 """Distinct legs per walk task: a task walks them on every floor (about 2 s of work on one
 core), small enough that the tasks of one repertoire spread evenly over the workers."""
