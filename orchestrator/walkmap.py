@@ -25,16 +25,8 @@ import pandas as pd
 from linkevo.orchestrator.explore import TrialRun
 from linkevo.sim import decode, simulate
 from linkevo.sim.physical import physical_checks
-from linkevo.sim.walk_map import (
-    COLUMNS,
-    CellBatch,
-    LegBatch,
-    LegToWalk,
-    build_cells,
-    group_legs,
-    rows_for_cells,
-    walk_legs,
-)
+from linkevo.sim.walk_map import COLUMNS, CellBatch
+from linkevo.sim.walk_map import walk_rows as _walk_rows
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 
@@ -124,41 +116,12 @@ Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
 `run_on_ray` bound to a cluster."""
 
 
-def leg_batches(legs: list[LegToWalk], seconds: float) -> list[LegBatch]:
-    """Returns the walk tasks of distinct legs (`sim.walk_map.group_legs`), `BATCH_LEGS`
-    legs on the same floors each; a leg is named by its index in `legs`."""
-    by_floors: dict[tuple[str, ...], list[int]] = {}
-    for i, leg in enumerate(legs):
-        by_floors.setdefault(leg.floors, []).append(i)
-    out = []
-    for floors, index in by_floors.items():
-        for start in range(0, len(index), BATCH_LEGS):
-            named = {str(i): legs[i].recipe for i in index[start : start + BATCH_LEGS]}
-            out.append(LegBatch(named, floors, seconds))
-    return out
-
-
 def walk_rows(
     run: Runner, batches: list[CellBatch], seconds: float
 ) -> Iterator[tuple[int, list[dict]]]:
-    """Yields, as each task ends, how many cells it built and the rows it settled: while
-    the legs are built, the rows of the cells that are not walked; then each distinct
-    leg's walks as the rows of every cell that builds it.
-
-    Args:
-        run: runs the build and walk tasks (`run_in_process`, or `run_on_ray` bound to a
-            cluster).
-        batches: the cells (`plan`).
-        seconds: each walk's length.
-    """
-    built = []
-    for cells in run(build_cells, batches):
-        yield len(cells), [r for b in cells for r in b.rows]
-        built += [b for b in cells if b.recipe is not None]
-    legs = group_legs(built)
-    for walked in run(walk_legs, leg_batches(legs, seconds)):
-        for name, leg_rows in walked.items():
-            yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
+    """`sim.walk_map.walk_rows` in tasks of `BATCH_LEGS` distinct legs: yields, as each
+    task ends, how many cells it built and the rows it settled."""
+    return _walk_rows(run, batches, seconds, BATCH_LEGS)
 
 
 def run_in_process(work: Callable[[Any], Any], items: list) -> Iterator[Any]:

@@ -16,7 +16,9 @@ repertoire have 5,202 distinct legs), and the walk is deterministic, so each dis
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -177,16 +179,55 @@ def rows_for_cells(rows: list[dict], cells: list[int]) -> list[dict]:
     return [{**row, "cell": int(cell)} for cell in cells for row in rows]
 
 
-def walk_cells(batch: CellBatch) -> list[dict]:
-    """Returns a row (`COLUMNS`) per cell and floor of the batch: `build_cells`, then each
-    distinct leg walked once (`walk_legs`), in this process."""
-    built = build_cells(batch)
-    rows = [r for b in built for r in b.rows]
+def leg_batches(legs: list[LegToWalk], seconds: float, per_task: int) -> list[LegBatch]:
+    """Returns the walk tasks of distinct legs (`group_legs`), `per_task` legs on the same
+    floors each; a leg is named by its index in `legs`."""
+    by_floors: dict[tuple[str, ...], list[int]] = {}
+    for i, leg in enumerate(legs):
+        by_floors.setdefault(leg.floors, []).append(i)
+    out = []
+    for floors, index in by_floors.items():
+        for start in range(0, len(index), per_task):
+            named = {str(i): legs[i].recipe for i in index[start : start + per_task]}
+            out.append(LegBatch(named, floors, seconds))
+    return out
+
+
+def walk_rows(
+    run: Callable[[Callable[[Any], Any], list], Iterable[Any]],
+    batches: list[CellBatch],
+    seconds: float,
+    legs_per_task: int,
+) -> Iterator[tuple[int, list[dict]]]:
+    """Yields, as each task ends, how many cells it built and the rows it settled: while
+    the legs are built, the rows of the cells that are not walked; then each distinct
+    leg's walks as the rows of every cell that builds it.
+
+    Args:
+        run: runs a function over items and yields each result as it ends (here, or as
+            Ray tasks: `orchestrator.walkmap`).
+        batches: the cells.
+        seconds: each walk's length.
+        legs_per_task: distinct legs per walk task.
+    """
+    built = []
+    for cells in run(build_cells, batches):
+        yield len(cells), [r for b in cells for r in b.rows]
+        built += [b for b in cells if b.recipe is not None]
     legs = group_legs(built)
-    recipes = {str(i): leg.recipe for i, leg in enumerate(legs)}
-    walked = walk_legs(LegBatch(recipes, batch.floors, batch.seconds))
-    for name, leg_rows in walked.items():
-        rows += rows_for_cells(leg_rows, legs[int(name)].cells)
+    for walked in run(walk_legs, leg_batches(legs, seconds, legs_per_task)):
+        for name, leg_rows in walked.items():
+            yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
+
+
+def walk_cells(batch: CellBatch) -> list[dict]:
+    """Returns a row (`COLUMNS`) per cell and floor of the batch, walked in this process
+    (`walk_rows` with every leg in one task)."""
+    rows = [
+        r
+        for _, part in walk_rows(map, [batch], batch.seconds, max(1, len(batch.cells)))
+        for r in part
+    ]
     cell_order = {int(c): i for i, c in enumerate(batch.cells)}
     return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))
 
