@@ -21,7 +21,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=(
             "Walks the robot of every chosen cell of REF's repertoire (a trial's RUN_ID, or "
             "each repertoire trial of a GRID_ID) once for 10 s on each floor in 3-D physics "
-            "(docs/walking.md), fanned out over Ray in batches of cells, and logs the walk "
+            "(docs/walking.md), fanned out over Ray (the legs built, then each distinct leg "
+            "walked once), and logs the walk "
             "map to the trial's run: walkmap.parquet (a row per cell and floor: distance, "
             "breaks, reason) and walkmap.png. `linkevo explore` then colours the map by "
             "distance and `linkevo pull` prints a cell's."
