@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from linkevo.sim.errors import LinkevoError
+
 DEVICE_ERRORS = {
     1: "result fail",
     2: "instruction error",
@@ -19,7 +21,7 @@ class HardwareError(Exception):
     """Base of every error raised by `hardware/`."""
 
 
-class ConfigError(HardwareError, ValueError):
+class ConfigError(HardwareError, LinkevoError, ValueError):
     """A robot config value is missing, unknown or out of range."""
 
 

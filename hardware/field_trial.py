@@ -19,6 +19,7 @@ import numpy as np
 
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.session import run_walk
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import MAP_ELITES
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.linkages import SourceLinkage
@@ -30,7 +31,7 @@ REAL, EMULATOR, PHYSICS = "False", "True", "physics"
 """Row order of the study's Table I; other approaches follow alphabetically."""
 
 
-class FieldTrialError(ValueError):
+class FieldTrialError(LinkevoError, ValueError):
     """Bad field-trial input: a bad distance, repeat count or robot name."""
 
 

@@ -7,6 +7,8 @@ import importlib
 import importlib.metadata
 import sys
 
+from linkevo.sim.errors import LinkevoError
+
 # Each subcommand module exposes `register(subparsers)`; the registered parser sets
 # `func(args) -> int`. Modules are imported only when the CLI starts, so one slow or
 # heavy import (Ray, torch) is paid only by the commands that need it at run time.
@@ -23,7 +25,7 @@ COMMAND_MODULES = (
 )
 
 
-class CliError(Exception):
+class CliError(LinkevoError):
     """Bad command-line input; the message names the bad value and what is allowed."""
 
 
@@ -103,11 +105,9 @@ def main(argv: list[str] | None = None) -> int:
     quiet_libraries()
     parser = build_parser()
     args = parser.parse_args(argv)
-    from linkevo.workers.store.tracking import TrackingUriError
-
     try:
         return int(args.func(args) or 0)
-    except (CliError, TrackingUriError) as exc:
+    except LinkevoError as exc:
         print(f"linkevo {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except Exception as exc:

@@ -10,7 +10,7 @@ from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
-from linkevo.orchestrator.cli import CliError
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
@@ -53,7 +53,7 @@ EXECUTION_KEYS: frozenset[str] = frozenset(
 """Keys that say how and where a grid runs, not what it computes: left out of the grid id."""
 
 
-class ConfigError(CliError):
+class ConfigError(LinkevoError):
     """A grid configuration that cannot be used; the message names the key and what is allowed."""
 
 

@@ -27,8 +27,8 @@ from linkevo.orchestrator.fan_out import (
     signals_stop_the_grid,
 )
 from linkevo.orchestrator.grid import Grid, grid_record, trial_dir, work_root
-from linkevo.orchestrator.grid_lease import GridLease
 from linkevo.orchestrator.grid_run import log_grid_summary, parent_run
+from linkevo.orchestrator.lease import Lease, Subject
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, warm_kernels
 from linkevo.orchestrator.reservation import Cluster, Reservation
@@ -187,7 +187,7 @@ def launch(
     Order: build and check every trial spec, check the tracking store, check that one
     trial's reservation fits (this machine's CPUs for a local instance, before Ray starts;
     else the cluster's, once connected), create the MLflow database and experiment,
-    take the grid's lease (`grid_lease`: one driver per grid), mark stale RUNNING runs
+    take the grid's lease (`lease`: one driver per grid), mark stale RUNNING runs
     KILLED (resume), plan the reservation for the trials left
     (`orchestrator.reservation`), start a local Ray instance, warm the numba kernel, log
     (or on resume reuse) the grid's parent run, fan out one task per trial.
@@ -205,7 +205,7 @@ def launch(
     Raises:
         ConfigError: the store is unreachable, the grid already has trial runs and
             `resume` is False, or one trial's reservation does not fit the cluster.
-        GridBusy: another driver is running the grid.
+        Busy: another driver is running the grid.
     """
     start = time.monotonic()
     cfg = grid.config
@@ -225,7 +225,7 @@ def launch(
         Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
         client = MlflowClient(uri)
-        lease = GridLease.take(client, uri, experiment_id, grid.grid_id)
+        lease = Lease.take(client, uri, experiment_id, Subject.grid(grid.grid_id))
         earlier = layout.trial_runs(client, experiment_id, grid.grid_id)
         if earlier and not resume:
             raise ConfigError(

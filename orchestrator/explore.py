@@ -37,6 +37,7 @@ from linkevo.orchestrator.report.load import in_study_order, latest_per_trial, s
 from linkevo.sim import decode, simulate
 from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, REPERTOIRE_APPROACHES, ordered
@@ -50,7 +51,7 @@ GRID_DRAWN = 500
 TEMPLATE = "explorer_page.html"
 
 
-class ExploreError(ValueError):
+class ExploreError(LinkevoError, ValueError):
     """A run or grid that has no repertoire to explore; the message says what would do."""
 
 

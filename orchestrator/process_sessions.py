@@ -17,11 +17,13 @@ import time
 import urllib.request
 from pathlib import Path
 
+from linkevo.sim.errors import LinkevoError
+
 STOP_TIMEOUT_S = 20.0
 """How long a session's leader has to stop its children before they are killed."""
 
 
-class ClusterError(RuntimeError):
+class ClusterError(LinkevoError, RuntimeError):
     """The local cluster cannot be started or stopped; the message says why and what to do."""
 
 

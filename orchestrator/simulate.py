@@ -128,21 +128,12 @@ def simulate_source(
 
 def write_pictures(walk: Walk, out: Path, title: str) -> list[Path]:
     """Writes the first walk's pictures into out: walk.gif (its first 4 s), walk.png,
-    path.png and contacts.png (`workers.plots.walk`); returns their paths.
-
-    Raises:
-        RuntimeError: when MuJoCo cannot render (no OpenGL), saying what to install.
-    """
+    path.png and contacts.png (`workers.plots.walk`, drawn without OpenGL); returns their
+    paths."""
     from linkevo.workers.plots import walk as draw
 
     out.mkdir(parents=True, exist_ok=True)
-    try:
-        frames = draw.render_frames(walk, seconds=4.0, fps=12.0, size=(400, 225))
-    except Exception as exc:  # MuJoCo raises plain Exceptions when no GL context opens
-        raise RuntimeError(
-            f"MuJoCo could not render ({exc}); install Debian's libosmesa6 and set "
-            "MUJOCO_GL=osmesa, or set MUJOCO_GL=egl where a GPU driver is present"
-        ) from exc
+    frames = draw.render_frames(walk, seconds=4.0, fps=12.0, size=(400, 225))
     return [
         draw.write_gif(frames, out / "walk.gif", fps=12.0),
         draw.write_still(frames[len(frames) // 2], out / "walk.png"),

@@ -24,6 +24,7 @@ import pandas as pd
 
 from linkevo.orchestrator.explore import TrialRun
 from linkevo.sim import decode, simulate
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.physical import physical_checks
 from linkevo.sim.walk_map import COLUMNS, CellBatch
 from linkevo.sim.walk_map import walk_rows as _walk_rows
@@ -40,7 +41,7 @@ CHECKPOINT_S = 30.0
 SELECTIONS = ("buildable", "all", "best:K")
 
 
-class WalkMapError(ValueError):
+class WalkMapError(LinkevoError, ValueError):
     """A walk map that cannot be made as asked; the message says what would do."""
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from linkevo.sim.errors import LinkevoError
+
 N_GENES = 56
 """Genes per genome."""
 N_STATIC = 3
@@ -26,7 +28,7 @@ LENGTH_GENES = np.array(
 """The 15 length genes (crank, then l1 and l2 of each block), shape (15,)."""
 
 
-class GenomeError(ValueError):
+class GenomeError(LinkevoError, ValueError):
     """A genome array that cannot be decoded."""
 
 

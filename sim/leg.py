@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim.decode import NODE_KINDS, LinkageBatch, decode
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.layers import layer_plan
 from linkevo.sim.lego import QuantiseError, whole_module_build
@@ -19,7 +20,7 @@ POSE_ANGLES = 360
 """Crank angles per turn at which a leg's poses are known (one degree apart)."""
 
 
-class LegError(ValueError):
+class LegError(LinkevoError, ValueError):
     """A linkage that cannot be walked (it does not turn a full turn); says why."""
 
 

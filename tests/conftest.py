@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
-# MuJoCo picks its OpenGL back end at its first import, and tests render offscreen.
-os.environ.setdefault("MUJOCO_GL", "osmesa")
-
 import numpy as np
 import pytest
 

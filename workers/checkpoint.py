@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from linkevo.sim.errors import LinkevoError
 from linkevo.workers.store.artifacts import read_npz, write_npz_atomic
 
 CHECKPOINT_FILE = "state.npz"
@@ -42,7 +43,7 @@ def save_checkpoint(folder: Path, checkpoint: Checkpoint) -> Path:
     return path
 
 
-class CheckpointError(ValueError):
+class CheckpointError(LinkevoError, ValueError):
     """A trial's checkpoint (or the metrics.csv it continues) cannot be resumed from.
 
     Attributes:

@@ -14,6 +14,7 @@ import numpy as np
 
 from linkevo.algorithms import Optimizer, eval_fitness, make_optimizer
 from linkevo.sim import decode, simulate
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.path_diversity import path_diversity
 from linkevo.sim.physical import physical_checks
@@ -54,7 +55,7 @@ exact bin edges), losses and descriptors are what statistics and cells are compu
 from, and all are small."""
 
 
-class TrialSpecError(ValueError):
+class TrialSpecError(LinkevoError, ValueError):
     """A trial setting that is not allowed; the message names the value and the choices."""
 
 

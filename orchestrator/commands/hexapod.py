@@ -17,7 +17,8 @@ from linkevo.orchestrator.cli import CliError
 if TYPE_CHECKING:
     from linkevo.hardware.config import RobotConfig
 
-DEFAULT_CONFIG = Path("configs/hexapod.toml")
+DEFAULT_CONFIG = "configs/hexapod.toml"
+"""The robot config when `--config` is not given: the one linkevo ships (`linkevo.configs`)."""
 _TRACKING_HELP = "MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)"
 
 
@@ -33,9 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     sub = parser.add_subparsers(dest="hexapod_command", required=True, metavar="ACTION")
 
     walk = sub.add_parser("walk", help="walk for a fixed time with the phase-locked tripod gait")
-    walk.add_argument(
-        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
-    )
+    config_option(walk)
     walk.add_argument(
         "--simulate",
         nargs="?",
@@ -104,9 +103,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="write the first walk's pictures here (walk.gif, walk.png, path.png, contacts.png)",
     )
     simulate.add_argument("--no-log", action="store_true", help="do not log to MLflow")
-    simulate.add_argument(
-        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
-    )
+    config_option(simulate)
     simulate.add_argument("--experiment", default="linkevo", help="experiment for a FILE.json")
     simulate.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
     simulate.set_defaults(func=hexapod_simulate.simulate_handler)
@@ -126,9 +123,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     study.add_argument("--repeats", type=int, default=5, help="walks per robot and floor")
     study.add_argument("--out", type=Path, default=None, help="write the table here as CSV")
     study.add_argument("--model", default="lean", help="lean (the default) or full")
-    study.add_argument(
-        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
-    )
+    config_option(study)
     study.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
     study.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
     study.set_defaults(func=hexapod_simulate.study_handler)
@@ -144,10 +139,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     table.set_defaults(func=table_handler)
 
 
-def _robot_options(parser: argparse.ArgumentParser) -> None:
+def config_option(parser: argparse.ArgumentParser) -> None:
+    """Adds `--config`: the robot's TOML (default: the one linkevo ships)."""
     parser.add_argument(
-        "--config", type=Path, default=DEFAULT_CONFIG, help=f"robot TOML (default {DEFAULT_CONFIG})"
+        "--config",
+        type=Path,
+        default=None,
+        help=f"robot TOML (default: the shipped {DEFAULT_CONFIG})",
     )
+
+
+def _robot_options(parser: argparse.ArgumentParser) -> None:
+    config_option(parser)
     parser.add_argument(
         "--simulate", action="store_true", help="run against the built-in bus emulator on a pty"
     )
@@ -159,8 +162,10 @@ def load_robot(args: argparse.Namespace) -> RobotConfig:
 
     if not math.isfinite(args.seconds) or args.seconds <= 0:
         raise CliError(f"--seconds {args.seconds}: allowed a positive number of seconds")
+    from linkevo.configs import shipped
+
     try:
-        return load_config(args.config)
+        return load_config(args.config or shipped("hexapod.toml"))
     except ConfigError as exc:
         raise CliError(str(exc)) from exc
 
@@ -335,7 +340,7 @@ def trial_handler(args: argparse.Namespace) -> int:
         params = {
             "seconds": str(args.seconds),
             "repeats": str(args.repeats),
-            "config": str(args.config),
+            "config": str(args.config or DEFAULT_CONFIG),
             "simulated": str(args.simulate),
         }
         run_id = log_field_trial(

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 
 from linkevo.orchestrator.config import ConfigError, from_dict
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 
@@ -37,7 +38,7 @@ STATUS_MISSING = "MISSING"
 DOWNLOAD_THREADS = 8
 
 
-class GridNotFoundError(LookupError):
+class GridNotFoundError(LinkevoError, LookupError):
     """No grid parent run matches the requested grid id (or no grid exists at all)."""
 
 

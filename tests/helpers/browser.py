@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -15,6 +16,12 @@ CHROMEDRIVER = Path("/usr/bin/chromedriver")
 def chromium(profile: Path | None = None, size: str = "1400,1000") -> Iterator[object]:
     """Yields a headless Chromium webdriver; `profile` makes it start from that (empty)
     user-data folder, as a browser that never saw the page would."""
+    for program, package in ((CHROMIUM, "chromium"), (CHROMEDRIVER, "chromium-driver")):
+        if not os.access(program, os.X_OK):
+            raise RuntimeError(
+                f"this test drives a real browser and {program} is missing; install it with: "
+                f"sudo apt-get install -y {package} (tests/system-packages.sh does, as root)"
+            )
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 

@@ -19,7 +19,7 @@ from mlflow.tracking import MlflowClient
 from linkevo.orchestrator import config
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.grid import Grid
-from linkevo.orchestrator.grid_lease import LEASE_TTL_S, Holder
+from linkevo.orchestrator.lease import LEASE_TTL_S, Holder
 from linkevo.orchestrator.reaper import stat_of, tree
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.tracking import ensure_experiment, store_lock

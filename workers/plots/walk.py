@@ -1,21 +1,56 @@
-"""Provides the pictures of a simulated walk: the robot rendered by MuJoCo (an animated GIF
-and a still), the body's path on the floor and each leg's floor contacts over time.
+"""Provides the pictures of a simulated walk: the robot drawn from the recorded walk (an
+animated GIF and a still), the body's path on the floor and each leg's floor contacts over
+time.
 
-MuJoCo renders offscreen through OpenGL: set `MUJOCO_GL=osmesa` (Debian's `libosmesa6`) or
-`egl` before the first `import mujoco` of the process.
+The robot is drawn with matplotlib from the walk's state trace, not by MuJoCo's OpenGL
+renderer: MuJoCo places every geom (`mj_kinematics`, no OpenGL), and each frame projects
+the beams (capsules), spheres, the frame's box and a chequered floor through a perspective
+camera that follows the frame, farthest first. So pictures need no OpenGL library (a fresh
+machine has neither OSMesa nor EGL) and look the same on every machine.
 """
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from PIL import Image
 
 from linkevo.sim.robot import LEG_SLOTS
 from linkevo.sim.walk import Walk
 from linkevo.workers.store.artifacts import atomic_path
+
+CAMERA = {"distance": 1.1, "azimuth_deg": 45.0, "elevation_deg": 18.0, "fov_deg": 45.0}
+"""The camera: this far from the frame (m), from the front left (azimuth from the robot's
++x, its front), this high above the floor's plane, with this vertical field of view."""
+FLOOR_SQUARE_M = 0.1
+_BEAM, _CRANK, _FRAME = "#7d828c", "#d99a1a", "#333f4c"
+_FLOOR = ("#d1d1c7", "#adada3")
+
+
+class _Camera:
+    """A perspective camera looking at `target` from `eye`, z up."""
+
+    def __init__(self, target: np.ndarray, size: tuple[int, int]) -> None:
+        az, el = math.radians(CAMERA["azimuth_deg"]), math.radians(CAMERA["elevation_deg"])
+        offset = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+        self.eye = target + CAMERA["distance"] * offset
+        forward = -offset
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        self.axes = np.stack([right, np.cross(right, forward), forward])  # (3, 3) rows
+        self.focal = size[1] / 2 / math.tan(math.radians(CAMERA["fov_deg"]) / 2)
+        self.centre = np.array(size, dtype=float) / 2
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Returns (..., 2) pixel coordinates (y up) and (...) depths of points (..., 3)."""
+        local = (points - self.eye) @ self.axes.T
+        depth = np.maximum(local[..., 2], 1e-3)
+        return self.centre + self.focal * local[..., :2] / depth[..., None], local[..., 2]
 
 
 def render_frames(
@@ -26,23 +61,106 @@ def render_frames(
     import mujoco
 
     if walk.model is None or "qpos" not in walk.trace:
-        raise ValueError("this walk has no model or state trace to render")
+        raise ValueError("this walk has no model or state trace to draw")
     model, trace = walk.model, walk.trace
     data = mujoco.MjData(model)
-    camera = mujoco.MjvCamera()
-    camera.type = mujoco.mjtCamera.mjCAMERA_TRACKING
-    camera.trackbodyid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "frame")
-    camera.distance, camera.azimuth, camera.elevation = 1.1, 135.0, -18.0
+    frame_body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "frame")
     times = np.arange(0.0, min(seconds, float(trace["t"][-1])), 1.0 / fps)
     rows = np.searchsorted(trace["t"], times)
+    fig = Figure(figsize=(size[0] / 100, size[1] / 100), dpi=100, facecolor="#dfe6ec")
+    canvas = FigureCanvasAgg(fig)
+    ax = fig.add_axes((0, 0, 1, 1))
     frames = []
-    with mujoco.Renderer(model, height=size[1], width=size[0]) as renderer:
-        for row in rows:
-            data.qpos[:] = trace["qpos"][row]
-            mujoco.mj_forward(model, data)
-            renderer.update_scene(data, camera=camera)
-            frames.append(renderer.render().copy())
+    for row in rows:
+        data.qpos[:] = trace["qpos"][row]
+        mujoco.mj_kinematics(model, data)
+        ax.clear()
+        _draw_scene(ax, model, data, _Camera(data.xpos[frame_body].copy(), size), size)
+        canvas.draw()
+        frames.append(np.asarray(canvas.buffer_rgba())[..., :3].copy())
     return frames
+
+
+def _draw_scene(ax, model, data, camera: _Camera, size: tuple[int, int]) -> None:
+    """Draws the floor, then every geom farthest first, on axes spanning the image."""
+    import mujoco
+
+    ax.set_xlim(0, size[0])
+    ax.set_ylim(0, size[1])
+    ax.set_axis_off()
+    ax.add_collection(_floor(camera))
+    shapes = []  # (depth, kind, points (K, 2), width px, colour)
+    frame_geom = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "frame")
+    crank_bodies = {
+        mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"{s}/{name}")
+        for s in LEG_SLOTS
+        for name in ("part0", "crank")
+    }
+    for g in range(model.ngeom):
+        kind = mujoco.mjtGeom(int(model.geom_type[g]))  # numpy ints never equal the enum
+        centre, mat = data.geom_xpos[g], data.geom_xmat[g].reshape(3, 3)
+        if kind == mujoco.mjtGeom.mjGEOM_BOX:
+            for face in _box_faces(centre, mat, model.geom_size[g]):
+                points, depth = camera.project(face)
+                shade = 0.55 + 0.45 * abs(np.cross(face[1] - face[0], face[2] - face[0])[2]) / (
+                    np.linalg.norm(np.cross(face[1] - face[0], face[2] - face[0])) + 1e-12
+                )
+                colour = _FRAME if g == frame_geom else _BEAM
+                shapes.append((depth.mean(), "poly", points, 0.0, _shade(colour, shade)))
+        elif kind in (mujoco.mjtGeom.mjGEOM_CAPSULE, mujoco.mjtGeom.mjGEOM_SPHERE):
+            half = model.geom_size[g, 1] if kind == mujoco.mjtGeom.mjGEOM_CAPSULE else 0.0
+            ends = centre + np.outer([-half, half], mat[:, 2])
+            points, depth = camera.project(ends)
+            width = 2 * model.geom_size[g, 0] * camera.focal / depth.mean() * 0.72  # px -> pt
+            colour = _CRANK if model.geom_bodyid[g] in crank_bodies else _BEAM
+            shapes.append((depth.mean(), "line", points, width, colour))
+    shapes.sort(key=lambda s: -s[0])
+    for _, kind, points, width, colour in shapes:
+        if kind == "poly":
+            ax.add_collection(PolyCollection([points], facecolors=colour, edgecolors="none"))
+        else:
+            ax.add_collection(
+                LineCollection(
+                    [points], linewidths=max(width, 0.6), colors=colour, capstyle="round"
+                )
+            )
+
+
+def _floor(camera: _Camera) -> PolyCollection:
+    """The chequered floor (`FLOOR_SQUARE_M` squares) around the point the camera sees."""
+    look = camera.eye + camera.axes[2] * CAMERA["distance"]
+    span = math.ceil(2.0 / FLOOR_SQUARE_M)
+    i0, j0 = (np.floor(look[:2] / FLOOR_SQUARE_M)).astype(int)
+    polygons, colours = [], []
+    for i in range(i0 - span, i0 + span):
+        for j in range(j0 - span, j0 + span):
+            corners = np.array([[i, j], [i + 1, j], [i + 1, j + 1], [i, j + 1]], dtype=float)
+            world = np.column_stack([corners * FLOOR_SQUARE_M, np.zeros(4)])
+            local = (world - camera.eye) @ camera.axes.T
+            if (local[:, 2] < 0.05).any():  # behind or at the camera: not drawn
+                continue
+            polygons.append(camera.project(world)[0])
+            colours.append(_FLOOR[(i + j) % 2])
+    return PolyCollection(polygons, facecolors=colours, edgecolors="none")
+
+
+def _box_faces(centre: np.ndarray, mat: np.ndarray, half: np.ndarray) -> list[np.ndarray]:
+    """Returns the six (4, 3) faces of a box."""
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    corners = centre + (signs * half) @ mat.T  # (8, 3), corner k has the signs of row k
+    faces = []
+    for axis in range(3):
+        for side in (-1, 1):
+            on = [k for k in range(8) if signs[k, axis] == side]
+            a, b = [(axis + 1) % 3, (axis + 2) % 3]
+            on.sort(key=lambda k: math.atan2(signs[k, b], signs[k, a]))
+            faces.append(corners[on])
+    return faces
+
+
+def _shade(colour: str, light: float) -> tuple[float, float, float]:
+    rgb = np.array([int(colour[i : i + 2], 16) for i in (1, 3, 5)]) / 255
+    return tuple(np.clip(rgb * light, 0, 1))
 
 
 def write_gif(frames: list[np.ndarray], path: Path, fps: float = 15.0) -> Path:

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage_doc import to_document
 from linkevo.workers.store import run_layout as layout
 
@@ -19,7 +20,7 @@ if TYPE_CHECKING:
     from mlflow.tracking import MlflowClient
 
 
-class LinkageError(ValueError):
+class LinkageError(LinkevoError, ValueError):
     """A linkage reference that cannot be resolved: bad text, unknown run or cell."""
 
 

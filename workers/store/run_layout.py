@@ -42,8 +42,9 @@ STOPPED_BY = "stopped_by"
 """How a trial ended: "budget", or "max_seconds" when its time limit cut it short."""
 
 LEASE_PREFIX = "linkevo.lease."
-"""An experiment tag `linkevo.lease.<grid_id>`: the driver running that grid
-(`orchestrator.grid_lease`)."""
+"""An experiment tag `linkevo.lease.<grid_id>` (the driver running that grid) or
+`linkevo.lease.walkmap.<run_id>` (the process making that run's walk map)
+(`orchestrator.lease`)."""
 
 GRID_CONFIG_JSON = "grid_config.json"
 GRID_CONFIG_TOML = "grid_config.toml"
@@ -85,9 +86,9 @@ def error_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {message.strip()}"[:ERROR_CHARS]
 
 
-def lease_tag(grid_id: str) -> str:
-    """Returns the experiment tag that holds a grid's lease."""
-    return f"{LEASE_PREFIX}{checked_id(grid_id, 'grid id')}"
+def lease_tag(name: str) -> str:
+    """Returns the experiment tag that holds a lease: a grid id, or `walkmap.<run_id>`."""
+    return f"{LEASE_PREFIX}{checked_id(name, 'lease')}"
 
 
 def parse_trial_key(key: str) -> tuple[str, str, int]:

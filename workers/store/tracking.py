@@ -9,6 +9,7 @@ import os
 from collections.abc import Iterator
 from pathlib import Path
 
+from linkevo.sim.errors import LinkevoError
 from linkevo.workers.store import run_layout as layout
 
 DEFAULT_STORE_DIR = Path("runs")
@@ -59,7 +60,7 @@ def default_tracking_uri(store_dir: Path | None = None) -> str:
     return f"sqlite:///{root / 'mlflow.db'}"
 
 
-class TrackingUriError(ValueError):
+class TrackingUriError(LinkevoError, ValueError):
     """A tracking URI linkevo cannot use; the message names it and what is allowed."""
 
 

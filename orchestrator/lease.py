@@ -1,8 +1,9 @@
-"""Provides `GridLease`: one driver per grid. A launch or resume takes the grid's lease in
-the store before it writes anything, renews it while it runs and hands it back at the end;
-a second driver on the same grid is refused while the lease is held.
+"""Provides `Lease`: one writer per grid and per walk map. A grid's launch or resume (and a
+walk map's run) takes the lease in the store before it writes anything, renews it while it
+runs and hands it back at the end; a second writer of the same thing is refused while the
+lease is held.
 
-The lease is an experiment tag (`run_layout.lease_tag`) holding the holder's host, pid,
+A lease is an experiment tag (`run_layout.lease_tag`) holding the holder's host, pid,
 start and last renewal, so it works on every store linkevo writes to (sqlite, a tracking
 server, a database). A holder that dies stops renewing: its lease expires `LEASE_TTL_S`
 after the last renewal, at once when it ran on this host and its process is gone, so a
@@ -37,13 +38,13 @@ the lease back: of two drivers that took it at once, the one whose write landed 
 keeps it and the other is refused."""
 
 
-class GridBusy(ConfigError):
-    """Another driver holds the grid's lease; the message says who and what to do."""
+class Busy(ConfigError):
+    """Another process holds the lease; the message says who and what to do."""
 
 
 @dataclass(frozen=True)
 class Holder:
-    """Who holds a grid's lease (times are seconds since the epoch)."""
+    """Who holds a lease (times are seconds since the epoch)."""
 
     host: str
     pid: int
@@ -61,31 +62,62 @@ class Holder:
     def describe(self, now: float) -> str:
         since = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(self.started))
         return (
-            f"driver pid {self.pid} on {self.host}, running since {since}, last renewed "
+            f"pid {self.pid} on {self.host}, running since {since}, last renewed "
             f"{now - self.renewed:.0f} s ago"
         )
 
 
-class GridLease:
-    """The lease of one grid, held by this process from `take` to `release`."""
+@dataclass(frozen=True)
+class Subject:
+    """What a lease guards: its tag's name (`run_layout.lease_tag`) and how the refusal
+    reads ("grid 3f2a is being run by another driver pid ...; {advice}")."""
 
-    def __init__(self, uri: str, experiment_id: str, grid_id: str, holder: Holder) -> None:
-        self._uri, self._experiment, self._grid = uri, experiment_id, grid_id
-        self._key = layout.lease_tag(grid_id)
-        self._holder = holder
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._renew, name="grid-lease", daemon=True)
+    name: str
+    what: str
+    doer: str
+    advice: str
 
     @classmethod
-    def take(cls, client: MlflowClient, uri: str, experiment_id: str, grid_id: str) -> GridLease:
-        """Takes the grid's lease and starts renewing it.
+    def grid(cls, grid_id: str) -> Subject:
+        return cls(
+            grid_id,
+            f"grid {grid_id} is being run",
+            "driver",
+            "two drivers on one grid would undo each other's trials. Wait for it to finish "
+            "(or stop it with Ctrl-C)",
+        )
+
+    @classmethod
+    def walk_map(cls, run_id: str, trial_key: str) -> Subject:
+        return cls(
+            f"walkmap.{run_id}",
+            f"the walk map of run {run_id} ({trial_key}) is being made",
+            "linkevo walkmap",
+            "two at once would each log a map without the other's rows. Wait for it to "
+            "finish (or stop it with Ctrl-C), then walk what it lacks with --resume",
+        )
+
+
+class Lease:
+    """A lease, held by this process from `take` to `release`."""
+
+    def __init__(self, uri: str, experiment_id: str, subject: Subject, holder: Holder) -> None:
+        self._uri, self._experiment, self._subject = uri, experiment_id, subject
+        self._key = layout.lease_tag(subject.name)
+        self._holder = holder
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._renew, name="lease", daemon=True)
+
+    @classmethod
+    def take(cls, client: MlflowClient, uri: str, experiment_id: str, subject: Subject) -> Lease:
+        """Takes the lease and starts renewing it.
 
         Raises:
-            GridBusy: a live driver holds it (named, with what to do).
+            Busy: a live process holds it (named, with what to do).
         """
         now = time.time()
         me = Holder(socket.gethostname(), os.getpid(), now, now, uuid.uuid4().hex)
-        lease = cls(uri, experiment_id, grid_id, me)
+        lease = cls(uri, experiment_id, subject, me)
         with store_lock(uri):
             lease._refuse_if_held(client, now)
             lease._write(client, me)
@@ -115,11 +147,11 @@ class GridLease:
         if current is None or current.token == self._holder.token or not current.alive(now):
             return
         expires = LEASE_TTL_S - (now - current.renewed)
-        raise GridBusy(
-            f"grid {self._grid} is being run by another {current.describe(now)}; two drivers "
-            "on one grid would undo each other's trials. Wait for it to finish (or stop it "
-            f"with Ctrl-C); if it died on another machine, its lease expires in {expires:.0f} "
-            "s and --resume then takes over"
+        subject = self._subject
+        raise Busy(
+            f"{subject.what} by another {subject.doer} {current.describe(now)}; "
+            f"{subject.advice}; if it died on another machine, its lease expires in "
+            f"{expires:.0f} s and --resume then takes over"
         )
 
     def _read(self, client: MlflowClient) -> Holder | None:
