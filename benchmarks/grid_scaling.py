@@ -40,6 +40,7 @@ from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.ray_evaluator import ActorPoolEvaluator
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment
 from linkevo.workers.trial import TrialSpec, run_trial
 
@@ -216,7 +217,6 @@ def quick_preset(work: Path, against: Path | None, rounds: int) -> None:
     of the same trials run in process without tracking. It holds the Ray task, the MLflow
     run, the final files and drawings, and their upload.
     """
-    from mlflow.tracking import MlflowClient
 
     from linkevo.orchestrator import config
     from linkevo.orchestrator.grid import Grid
@@ -241,9 +241,9 @@ def quick_preset(work: Path, against: Path | None, rounds: int) -> None:
     preset = REPO / "configs" / "quick.toml"
     store = work / f"store-0-{abs(hash('this tree'))}"
     grid = Grid.from_config(config.load(preset))
-    client = MlflowClient(f"sqlite:///{store / 'mlflow.db'}")
-    experiment = client.get_experiment_by_name(grid.config.experiment)
-    runs = layout.search(client, [experiment.experiment_id], layout.where(layout.TRIAL))
+    runs = RunStore(f"sqlite:///{store / 'mlflow.db'}", grid.config.experiment).search(
+        layout.where(layout.TRIAL)
+    )
     fan_out = (max(r.info.end_time for r in runs) - min(r.info.start_time for r in runs)) / 1e3
     slots = Reservation.plan(grid.config, len(grid.cells), Cluster.this_machine()).concurrent
     specs = trial_specs(grid)

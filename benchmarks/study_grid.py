@@ -21,11 +21,10 @@ import sys
 import tempfile
 from pathlib import Path
 
-from mlflow.tracking import MlflowClient
-
 from linkevo.orchestrator.config import load
 from linkevo.orchestrator.reservation import Cluster, Reservation
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import resolve_tracking_uri
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,10 +62,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="linkevo-study-") as tmp:
         uri = resolve_tracking_uri(args.tracking_uri or (None if args.grid_id else tmp))
         grid_id = args.grid_id or run_grid(args, Path(tmp))
-        client = MlflowClient(uri)
-        experiment = client.get_experiment_by_name("linkevo").experiment_id
-        (parent,) = layout.grid_runs(client, experiment, grid_id)
-        trials = layout.trial_runs(client, experiment, grid_id)
+        store = RunStore(uri)
+        client = store.client
+        (parent,) = store.grid_runs(grid_id)
+        trials = store.trial_runs(grid_id)
         config_path = client.download_artifacts(parent.info.run_id, layout.GRID_CONFIG_TOML, tmp)
         config = load(config_path)
     seconds = {r: (r.info.end_time - r.info.start_time) / 1000 for r in trials if r.info.end_time}

@@ -22,16 +22,14 @@ import time
 from pathlib import Path
 
 import numpy as np
-from mlflow.tracking import MlflowClient
 from scipy.stats import spearmanr
 
-from linkevo.orchestrator.explore import trial_run
 from linkevo.orchestrator.walkmap import Selection
 from linkevo.sim.leg import leg_from_genome
 from linkevo.sim.robot import FLOORS
 from linkevo.sim.walk import WalkSettings, field_trials, walk
 from linkevo.sim.walk_map import WALK_SECONDS, walk_map_settings
-from linkevo.workers.store.linkages import repertoire
+from linkevo.workers.store.runs import RunStore
 
 WAYS = ("Table I protocol (5 walks)", "one Table I walk", "walk-map walk")
 
@@ -43,10 +41,10 @@ def main() -> None:
     parser.add_argument("--cells", type=int, default=24)
     args = parser.parse_args()
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
-    client = MlflowClient(tracking_uri=args.tracking_uri)
-    trial = trial_run(client, args.run_id)
+    store = RunStore(args.tracking_uri)
+    trial = store.repertoire_trial(args.run_id)
     with tempfile.TemporaryDirectory() as tmp:
-        table = repertoire(client, args.run_id, Path(tmp))
+        table = store.repertoire(args.run_id, Path(tmp))
     buildable = Selection("buildable").choose(table, trial.mode)
     chosen = buildable.iloc[:: max(1, len(buildable) // args.cells)].head(args.cells)
     print(f"{trial.trial_key}: {len(chosen)} of {len(buildable)} buildable cells")

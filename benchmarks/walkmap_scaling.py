@@ -22,12 +22,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from mlflow.tracking import MlflowClient
-
-from linkevo.orchestrator.explore import trial_run
 from linkevo.orchestrator.walkmap import Selection, plan, run_in_process, run_on_ray, walk_rows
 from linkevo.sim.walk_map import WALK_SECONDS
-from linkevo.workers.store.linkages import repertoire
+from linkevo.workers.store.runs import RunStore
 
 FLOORS = ("flat", "carpet")
 
@@ -39,10 +36,10 @@ def main() -> None:
     parser.add_argument("--cells", type=int, default=96)
     parser.add_argument("--full", action="store_true")
     args = parser.parse_args()
-    client = MlflowClient(tracking_uri=args.tracking_uri)
-    trial = trial_run(client, args.run_id)
+    store = RunStore(args.tracking_uri)
+    trial = store.repertoire_trial(args.run_id)
     with tempfile.TemporaryDirectory() as tmp:
-        table = repertoire(client, args.run_id, Path(tmp))
+        table = store.repertoire(args.run_id, Path(tmp))
     every = Selection("all").choose(table, trial.mode).sort_values("cell", ignore_index=True)
     middle = max(0, len(every) // 2 - args.cells // 2)
     sample = every.iloc[middle : middle + args.cells]

@@ -23,6 +23,7 @@ from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import MAP_ELITES
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.linkages import SourceLinkage
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment
 
 ROBOTS = ("first", "modified")
@@ -168,18 +169,10 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
     """Returns the Table I summary of the experiment's real field trials beside the 3-D
     simulation's predictions for the same approach, robot and floor, or with `simulated`
     the emulator's dry runs alone."""
-    from mlflow.tracking import MlflowClient
 
-    client = MlflowClient(tracking_uri=uri)
-    found = client.get_experiment_by_name(experiment)
-    if found is None:
-        raise FieldTrialError(f"--experiment {experiment!r} does not exist in {uri}")
-    runs = layout.search(
-        client,
-        [found.experiment_id],
-        layout.where(layout.FIELD_TRIAL),
-        order_by=["attributes.start_time ASC"],
-    )
+    store = RunStore(uri, experiment)
+    client = store.client
+    runs = store.search(layout.where(layout.FIELD_TRIAL), order_by=["attributes.start_time ASC"])
     shown_kind = EMULATOR if simulated else REAL
     distances: dict[tuple[str, str, str], list[float]] = {}
     predicted: dict[tuple[str, str, str], list[float]] = {}

@@ -17,8 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TextIO
 
-from mlflow.tracking import MlflowClient
-
 from linkevo.orchestrator.config import ConfigError
 from linkevo.orchestrator.fan_out import (
     GridInterrupted,
@@ -41,6 +39,7 @@ from linkevo.workers.store.outage import (
     patiently,
     use_quick_http,
 )
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
@@ -224,9 +223,10 @@ def launch(
     try:
         Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
-        client = MlflowClient(uri)
+        store = RunStore(uri, cfg.experiment, experiment_id=experiment_id)
+        client = store.client
         lease = Lease.take(client, uri, experiment_id, Subject.grid(grid.grid_id))
-        earlier = layout.trial_runs(client, experiment_id, grid.grid_id)
+        earlier = store.trial_runs(grid.grid_id)
         if earlier and not resume:
             raise ConfigError(
                 f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {uri}; "
@@ -258,16 +258,13 @@ def launch(
             started_ray = connect_ray(address, cluster)
         if todo:
             warm_kernels()
-        parent_run_id = parent_run(client, experiment_id, grid)
+        parent_run_id = parent_run(store, grid)
         use_quick_http()  # no call waits minutes on a silent server; `watch` tells the user
         watch = ServerWatch(uri, cfg.server_outage_s)
         record = {"grid_id": grid.grid_id, "tracking_uri": uri, "parent_run_id": parent_run_id}
         grid_record(root, grid).parent.mkdir(parents=True, exist_ok=True)
         write_json_atomic(grid_record(root, grid), record)
-        ctx = TrialContext(
-            uri, experiment_id, parent_run_id, root, client, specs, reservation, started_ray,
-            watch,
-        )  # fmt: skip
+        ctx = TrialContext(store, parent_run_id, root, specs, reservation, started_ray, watch)
         view = Progress(ctx, grid, len(grid.cells) - len(todo), progress, stream)
         try:
             with signals_stop_the_grid() as received:
@@ -276,7 +273,7 @@ def launch(
             if isinstance(exc, GridInterrupted):
                 exc.finished += len(finished)
             if not isinstance(exc, ServerLost) and answers(uri):
-                running = layout.trial_runs(client, experiment_id, grid.grid_id, status="RUNNING")
+                running = store.trial_runs(grid.grid_id, status="RUNNING")
                 for run in running:
                     end_run(client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
                 end_run(client, parent_run_id, "KILLED", layout.error_text(exc))

@@ -25,7 +25,6 @@ import json
 import shutil
 import tempfile
 from collections.abc import Callable
-from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
 
@@ -33,38 +32,20 @@ import numpy as np
 import pandas as pd
 
 from linkevo.orchestrator.pull import own_modules
-from linkevo.orchestrator.report.load import in_study_order, latest_per_trial, search_trial_runs
 from linkevo.sim import decode, simulate
 from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES
-from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
-from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, REPERTOIRE_APPROACHES, ordered
-from linkevo.workers.store import run_layout as layout
+from linkevo.sim.study import FITNESSES, ordered
 from linkevo.workers.store.artifacts import write_bytes_atomic
+from linkevo.workers.store.runs import RunStore, TrialRun
+from linkevo.workers.store.tables import bin_columns, space_of
 
 PAGE_ARTIFACT = "explorer.html"
 """The page's name among a run's artefacts (a trial's run, or a grid's parent run)."""
 GRID_DRAWN = 500
 """Cells per trial whose linkage a grid page draws by default (the lowest-loss ones)."""
 TEMPLATE = "explorer_page.html"
-
-
-class ExploreError(LinkevoError, ValueError):
-    """A run or grid that has no repertoire to explore; the message says what would do."""
-
-
-@dataclass(frozen=True)
-class TrialRun:
-    """One repertoire trial to put on a page: its run, tags and settings."""
-
-    run_id: str
-    trial_key: str
-    approach: str
-    fitness: str
-    mode: str
-    n_angles: int
 
 
 def repertoire_view(
@@ -95,14 +76,11 @@ def repertoire_view(
         to 0.01, descriptors to 0.001, distances to 0.1 cm.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
-    bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))
-    desc_columns = [f"desc_{c.removeprefix('bin_')}" for c in bin_columns]
-    space = DESCRIPTOR_SPACES.get(trial.approach, DESCRIPTOR_SPACES["MAP-LIS"])
-    if space.dims == len(bin_columns):
-        names, resolution = list(space.names), space.resolution
-    else:  # a grid this linkevo does not name: number the descriptors
-        names = [f"d{i}" for i in range(len(bin_columns))]
-        resolution = int(table[bin_columns].to_numpy().max()) + 1
+    bins_of = bin_columns(table.columns)
+    desc_columns = [f"desc_{c.removeprefix('bin_')}" for c in bins_of]
+    space = space_of(trial.approach, len(bins_of))
+    names = list(space.names)
+    resolution = max(space.resolution, int(table[bins_of].to_numpy().max()) + 1)
     genomes = np.stack(table["genome"].to_numpy()).astype(np.float64)
     batch = decode(genomes, trial.mode)
     motion = simulate(batch, trial.n_angles)
@@ -119,7 +97,7 @@ def repertoire_view(
         json_floats(checks.size_modules[:, 0], 1),
         json_floats(checks.size_modules[:, 1], 1),
     ]
-    bins = table[bin_columns].to_numpy().astype(int).tolist()
+    bins = table[bins_of].to_numpy().astype(int).tolist()
     descriptors = json_floats(table[desc_columns].to_numpy(), 3)
     loss = json_floats(table["loss"].to_numpy(), 4)
     error = table["error"].to_numpy().astype(int).tolist()
@@ -242,84 +220,8 @@ def render_page(title: str, views: list[dict]) -> str:
     )
 
 
-def trial_run(client, run_id: str) -> TrialRun:
-    """Returns a repertoire trial's identity from its MLflow run.
-
-    Raises:
-        ExploreError: no such run, or a run whose approach keeps no repertoire.
-    """
-    from mlflow.exceptions import MlflowException
-
-    try:
-        run = client.get_run(run_id)
-    except MlflowException as exc:
-        raise ExploreError(f"{run_id!r} is neither a trial run nor a grid id here") from exc
-    tags, params = run.data.tags, run.data.params
-    approach = tags.get(layout.APPROACH, "unknown")
-    if approach not in REPERTOIRE_APPROACHES:
-        raise ExploreError(
-            f"run {run_id} is a {approach} trial, which keeps a population, not a repertoire; "
-            f"explore a trial of {', '.join(REPERTOIRE_APPROACHES)} or a grid id"
-        )
-    return TrialRun(
-        run_id=run_id,
-        trial_key=tags.get(layout.TRIAL_KEY, run_id),
-        approach=approach,
-        fitness=tags.get(layout.FITNESS, "unknown"),
-        mode=params.get("mode", "paper"),
-        n_angles=int(params.get("n_angles", DEFAULT_ANGLES)),
-    )
-
-
-def grid_trials(client, grid_id: str, experiment: str) -> list[TrialRun]:
-    """Returns a grid's FINISHED repertoire trials in the study's order (one run per key).
-
-    Raises:
-        ExploreError: the grid has none.
-    """
-    approach, fitness, index = (f"tags.{t}" for t in layout.TRIAL_TAGS)
-    runs = search_trial_runs(client, grid_id, experiment)
-    if runs.empty or approach not in runs:
-        raise ExploreError(f"grid {grid_id} has no trial runs")
-    runs = latest_per_trial(runs)
-    runs = runs[(runs.status == "FINISHED") & runs[approach].isin(REPERTOIRE_APPROACHES)]
-    if runs.empty:
-        raise ExploreError(
-            f"grid {grid_id} has no finished trial of {', '.join(REPERTOIRE_APPROACHES)} to explore"
-        )
-
-    runs = in_study_order(runs, approach, fitness, index if index in runs else None)
-    return [trial_run(client, run_id) for run_id in runs.run_id]
-
-
-def resolve_repertoires(
-    client, ref: str, experiment: str
-) -> tuple[list[TrialRun], str | None, str | None]:
-    """Returns the repertoire trials a command's REF names (a trial's run id, or every
-    repertoire trial of a grid), the grid's id and its parent run id (None, None for one
-    trial).
-
-    Raises:
-        ExploreError: REF is not an id, or names neither a repertoire trial nor a grid.
-    """
-    from linkevo.orchestrator.report.load import GridNotFoundError, find_grid_run
-
-    if not layout.ID_PATTERN.fullmatch(ref):  # it goes into an MLflow filter string
-        raise ExploreError(
-            f"{ref!r} is neither a run id nor a grid id; allowed: letters, digits, '.', '_', '-'"
-        )
-    try:
-        grid_id, parent = find_grid_run(client, ref, experiment)
-    except GridNotFoundError as no_grid:
-        try:
-            return [trial_run(client, ref)], None, None
-        except ExploreError as exc:
-            raise ExploreError(f"{exc} ({no_grid})") from exc
-    return grid_trials(client, grid_id, experiment), grid_id, parent
-
-
 def explore(
-    client,
+    store: RunStore,
     trials: list[TrialRun],
     out: Path,
     *,
@@ -335,18 +237,16 @@ def explore(
         log_to: a run id to log the page to as `explorer.html` (None: do not log).
         progress: called with (trials done, trial) after each trial is read.
     """
-    from linkevo.workers.store.linkages import repertoire, walk_map
-
     views = []
     with tempfile.TemporaryDirectory(prefix="linkevo-explore-") as tmp:
         for done, trial in enumerate(trials, 1):
-            table = repertoire(client, trial.run_id, Path(tmp) / trial.run_id)
-            walks = walk_map(client, trial.run_id, Path(tmp) / f"{trial.run_id}-walks")
+            table = store.repertoire(trial.run_id, Path(tmp) / trial.run_id)
+            walks = store.walk_map(trial.run_id, Path(tmp) / f"{trial.run_id}-walks")
             views.append(repertoire_view(table, trial, drawn, walks))
             if progress is not None:
                 progress(done, trial)
         write_bytes_atomic(out, render_page(title, views).encode("utf-8"))
         if log_to is not None:
             named = shutil.copyfile(out, Path(tmp) / PAGE_ARTIFACT)  # the name it is logged as
-            client.log_artifact(log_to, str(named))
+            store.client.log_artifact(log_to, str(named))
     return out

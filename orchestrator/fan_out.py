@@ -18,6 +18,7 @@ from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.reservation import Reservation
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.outage import ServerLost, ServerWatch, patiently
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialJob, TrialOutcome, end_run
 
@@ -52,17 +53,27 @@ class TrialContext:
     """What every trial task of one launch shares: the store, the parent run, the trial
     folders' root, each trial's spec and the reservation."""
 
-    uri: str
-    experiment_id: str
+    store: RunStore
     parent_run_id: str
     root: Path
-    client: MlflowClient
     specs: dict[str, TrialSpec]
     reservation: Reservation
     owns_ray: bool
     """True when this launch connected to (or started) Ray itself, and may disconnect."""
     watch: ServerWatch
     """Whether the tracking server answers (`workers.store.outage`)."""
+
+    @property
+    def uri(self) -> str:
+        return self.store.uri
+
+    @property
+    def experiment_id(self) -> str:
+        return self.store.experiment_id
+
+    @property
+    def client(self) -> MlflowClient:
+        return self.store.client
 
     def job(self, grid: Grid, cell: TrialCell) -> TrialJob:
         """Returns the trial task's input for one cell."""
@@ -87,7 +98,7 @@ def lost_trial(
 ) -> TrialOutcome:
     """Returns the outcome of a trial whose task failed past its retries; ends its run."""
     message = layout.error_text(exc)
-    runs = layout.trial_runs(ctx.client, ctx.experiment_id, grid_id, trial_key=cell.key)
+    runs = ctx.store.trial_runs(grid_id, trial_key=cell.key)
     for run in runs:
         if run.info.status == "RUNNING":
             end_run(ctx.client, run.info.run_id, "FAILED", message)

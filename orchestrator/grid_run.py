@@ -12,18 +12,14 @@ from mlflow.tracking import MlflowClient
 from linkevo.orchestrator.config import GridConfig, flatten, to_toml
 from linkevo.orchestrator.grid import Grid
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial_task import TrialOutcome
 
 
-def parent_run(client: MlflowClient, experiment_id: str, grid: Grid) -> str:
+def parent_run(store: RunStore, grid: Grid) -> str:
     """Returns the grid's parent run id, reusing an earlier launch's run on resume."""
-    existing = layout.search(  # the first launch's run, which every resume reuses
-        client,
-        [experiment_id],
-        layout.where(layout.GRID, **{layout.GRID_ID: grid.grid_id}),
-        order_by=["attributes.start_time ASC"],
-        limit=1,
-    )
+    client, experiment_id = store.client, store.experiment_id
+    existing = store.grid_runs(grid.grid_id, first=True, limit=1)  # what every resume reuses
     if existing:
         first = existing[0]
         run_id = first.info.run_id

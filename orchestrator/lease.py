@@ -127,6 +127,13 @@ class Lease:
         lease._thread.start()
         return lease
 
+    @classmethod
+    def refuse_if_held(cls, client: MlflowClient, experiment_id: str, subject: Subject) -> None:
+        """Raises Busy when a live process holds the lease (checked, not taken)."""
+        now = time.time()
+        nobody = Holder("", 0, now, now, "")
+        cls("", experiment_id, subject, nobody)._refuse_if_held(client, now)
+
     def release(self, write: bool = True) -> None:
         """Stops renewing and hands the lease back (if it is still this driver's); with
         `write` False (the store is unreachable) it only stops renewing, and the lease

@@ -5,8 +5,6 @@ from __future__ import annotations
 import time
 from typing import TYPE_CHECKING, TextIO
 
-from linkevo.workers.store import run_layout as layout
-
 if TYPE_CHECKING:
     from linkevo.orchestrator.fan_out import TrialContext
     from linkevo.orchestrator.grid import Grid
@@ -48,9 +46,7 @@ class Progress:
         if self._ctx.watch.down_since is not None:
             return
         try:
-            runs = layout.trial_runs(
-                self._ctx.client, self._ctx.experiment_id, self._grid_id, status="RUNNING"
-            )
+            runs = self._ctx.store.trial_runs(self._grid_id, status="RUNNING")
         except Exception:  # the server went silent since the watch last asked
             return
         evaluations = self._ended_evaluations + sum(

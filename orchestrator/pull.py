@@ -17,6 +17,7 @@ from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_tem
 from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.store.artifacts import write_json_atomic, write_text_atomic
 from linkevo.workers.store.linkages import SourceLinkage
+from linkevo.workers.store.runs import RunStore
 
 SHEET_COLUMNS = (
     "beam",
@@ -200,15 +201,13 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     }
 
 
-def predicted_walks(client, source: SourceLinkage) -> dict[str, dict]:
+def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
     """Returns the pulled cell's rows of its trial's walk map (`linkevo walkmap`), per floor
     (distance, breaks, reason), or {} when the cell was not walked."""
-    from linkevo.workers.store.linkages import walk_map
-
     if source.cell is None or not source.run_id:
         return {}
     with tempfile.TemporaryDirectory() as tmp:
-        walks = walk_map(client, source.run_id, Path(tmp))
+        walks = store.walk_map(source.run_id, Path(tmp))
     if walks is None:
         return {}
     rows = walks[(walks["cell"] == source.cell) & (walks["status"] == "walked")]

@@ -4,16 +4,16 @@ and logged as a field trial marked `simulated=physics`."""
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.hardware.field_trial import PHYSICS, log_field_trial
 from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.linkage_doc import DocumentError, from_document
 from linkevo.sim.robot import LEG_SLOTS, floor
 from linkevo.sim.walk import Walk, WalkSettings, field_trials, summary
+from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.linkages import SourceLinkage
 
 if TYPE_CHECKING:
@@ -61,11 +61,11 @@ def document_source(path: Path, experiment_id: str) -> SourceLinkage:
     Raises:
         ValueError: a file that is not a readable linkage document, naming it.
     """
+    document = read_document(path)
     try:
-        document = json.loads(path.read_text(encoding="utf-8"))
         from_document(document)
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError, ValueError) as exc:
-        raise ValueError(f"{path}: not a linkage document ({exc})") from exc
+    except DocumentError as exc:
+        raise DocumentError(f"{path}: not a linkage document ({exc})") from exc
     meta = document.get("meta", {})
     return SourceLinkage(
         run_id=str(meta.get("run_id") or ""),

@@ -25,14 +25,14 @@ import numpy as np
 import pandas as pd
 
 from linkevo.hardware.config import RobotConfig
-from linkevo.orchestrator.report.load import latest_per_trial, search_trial_runs
 from linkevo.orchestrator.simulate import log_simulated, simulate_source
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.robot import FLOORS
 from linkevo.sim.study import MAP_ELITES
 from linkevo.workers.plots.repertoire import select_paths
 from linkevo.workers.store import run_layout as layout
-from linkevo.workers.store.linkages import LinkageRef, SourceLinkage, load_source, repertoire
+from linkevo.workers.store.linkages import LinkageRef, SourceLinkage, load_source
+from linkevo.workers.store.runs import NotFound, RunStore, latest_per_trial
 
 FITNESS = "Fp"
 """The study built robots from F_p repertoires only."""
@@ -50,9 +50,8 @@ class Robot:
 
 
 def choose_robots(
-    client,
+    store: RunStore,
     grid_id: str,
-    experiment: str,
     *,
     config: RobotConfig,
     seconds: float,
@@ -61,9 +60,9 @@ def choose_robots(
     progress: Callable[[str], None] = print,
 ) -> list[Robot]:
     """Returns the first and the modified robot of each MAP-Elites approach in the grid."""
-    runs = latest_per_trial(search_trial_runs(client, grid_id, experiment))
+    runs = latest_per_trial(store.trial_table(grid_id))
     if runs.empty:
-        raise ValueError(f"grid {grid_id!r} has no trial runs in experiment {experiment!r}")
+        raise NotFound(f"grid {grid_id!r} has no trial runs in experiment {store.experiment!r}")
     approach_tag, fitness_tag, key_tag = (
         f"tags.{t}" for t in (layout.APPROACH, layout.FITNESS, layout.TRIAL_KEY)
     )
@@ -75,9 +74,9 @@ def choose_robots(
             continue
         best = trials.sort_values(["metrics.best_loss", key_tag]).iloc[0]
         run_id, key = str(best["run_id"]), str(best[key_tag])
-        first = load_source(client, LinkageRef(run_id))
+        first = load_source(store, LinkageRef(run_id))
         with tempfile.TemporaryDirectory() as tmp:
-            table = repertoire(client, run_id, Path(tmp))
+            table = store.repertoire(run_id, Path(tmp))
         mode = str(first.document.get("mode", "paper"))
         regions = select_paths(table, approach)
         start = regions.iloc[int(regions["loss"].to_numpy().argmin())]
@@ -119,10 +118,8 @@ def choose_robots(
 
 
 def predict_table_one(
-    uri: str,
-    client,
+    store: RunStore,
     grid_id: str,
-    experiment: str,
     *,
     config: RobotConfig,
     seconds: float = 10.0,
@@ -134,8 +131,8 @@ def predict_table_one(
     """Returns Table I predicted for the grid: one row per approach, robot and floor with
     the distances walked, whether it breaks and why, and where the linkage came from."""
     robots = choose_robots(
-        client, grid_id, experiment, config=config, seconds=seconds, repeats=repeats,
-        model=model, progress=progress,
+        store, grid_id, config=config, seconds=seconds, repeats=repeats, model=model,
+        progress=progress,
     )  # fmt: skip
     rows = []
     for robot in robots:
@@ -143,7 +140,7 @@ def predict_table_one(
             result, _ = simulate_source(
                 robot.source, floor, config=config, seconds=seconds, repeats=repeats, model=model
             )
-            run_id = log_simulated(uri, robot.source, robot.robot, result, 0) if log else ""
+            run_id = log_simulated(store.uri, robot.source, robot.robot, result, 0) if log else ""
             rows.append(
                 {
                     "approach": robot.approach,

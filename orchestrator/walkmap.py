@@ -22,14 +22,15 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.explore import TrialRun
 from linkevo.sim import decode, simulate
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.physical import physical_checks
-from linkevo.sim.walk_map import COLUMNS, CellBatch
+from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_map_frame
 from linkevo.sim.walk_map import walk_rows as _walk_rows
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
+from linkevo.workers.store.runs import RunStore, TrialRun
+from linkevo.workers.store.tables import bin_columns
 
 BATCH_CELLS = 8
 """Cells per build task (1-2 s of work on one core)."""
@@ -144,106 +145,143 @@ def _on_one_core(work: Callable[[Any], Any], item: Any) -> Any:
 
 def run_on_ray(work: Callable[[Any], Any], items: list, in_flight: int) -> Iterator[Any]:
     """Yields `work(item)` for each item as its Ray task ends (one CPU per task, at most
-    `in_flight` tasks submitted at a time so an interruption leaves little running)."""
+    `in_flight` tasks submitted at a time so an interruption leaves little running).
+
+    Tasks in flight when the caller stops are not cancelled: a `ray.cancel` that meets a
+    task's reply on its way back aborts the driver inside Ray. The command disconnects
+    from Ray instead, which ends them (`orchestrator.fan_out` does the same for a grid).
+    """
     import ray
 
     task = ray.remote(num_cpus=1, max_retries=2)(_on_one_core)
     pending = list(items)
     running: list = []
-    try:
-        while pending or running:
-            while pending and len(running) < in_flight:
-                running.append(task.remote(work, pending.pop(0)))
-            ready, running = ray.wait(running, num_returns=1)
-            yield ray.get(ready[0])
-    finally:
-        for ref in running:
-            ray.cancel(ref, force=True)
+    while pending or running:
+        while pending and len(running) < in_flight:
+            running.append(task.remote(work, pending.pop(0)))
+        ready, running = ray.wait(running, num_returns=1)
+        yield ray.get(ready[0])
 
 
-def refuse_overwrite(client, trial: TrialRun, resume: bool) -> None:
-    """Raises WalkMapError when the trial's run has a walk map and `resume` is off, so
-    nothing is overwritten unasked."""
-    if resume:
+def refuse_overwrite(store: RunStore, trial: TrialRun, resume: bool, restart: bool) -> None:
+    """Raises WalkMapError when the trial's run has a walk map and neither `resume` nor
+    `restart` is on, so nothing is overwritten unasked; raises `lease.Busy` when another
+    process is making its walk map."""
+    from linkevo.orchestrator.lease import Lease, Subject
+
+    subject = Subject.walk_map(trial.run_id, trial.trial_key)
+    Lease.refuse_if_held(store.client, store.experiment_id, subject)
+    if resume or restart:
         return
-    names = {a.path for a in client.list_artifacts(trial.run_id)}
+    names = {a.path for a in store.client.list_artifacts(trial.run_id)}
     if layout.WALK_MAP in names:
         raise WalkMapError(
             f"run {trial.run_id} ({trial.trial_key}) already has a walk map; add --resume "
-            "to walk only the cells it lacks"
+            "to walk only the cells it lacks, or --restart to walk the map anew"
         )
 
 
+@dataclass(frozen=True)
+class WalkMapResult:
+    """A walk map as logged: its rows (`sim.walk_map.COLUMNS` and the cells' bins), and
+    whether this call walked anything (False: the map was complete already)."""
+
+    frame: pd.DataFrame
+    walked: bool
+
+
 def walk_map(
-    client,
+    store: RunStore,
     trial: TrialRun,
     run: Runner,
     *,
     floors: tuple[str, ...],
     selection: Selection,
-    resume: bool,
+    resume: bool = False,
+    restart: bool = False,
     seconds: float,
     tick: Callable[[str, int, int], None] | None = None,
-) -> pd.DataFrame:
+) -> WalkMapResult:
     """Walks one repertoire trial's chosen cells and logs its walk map; returns it.
+
+    The run's walk-map lease (`orchestrator.lease`) is held throughout, so a second walk
+    map of the same run is refused instead of logging a map without this one's rows.
 
     Args:
         run: runs the build and walk tasks (`run_in_process`, or `run_on_ray` bound to a
             cluster).
-        resume: complete the map the run already has (without it, a run that has one is
-            refused, so nothing is overwritten unasked).
+        resume: complete the map the run already has; a complete map is returned as it
+            is, nothing logged.
+        restart: walk the map anew, replacing the run's (a damaged one, say).
         tick: called as tasks end with ("building legs", cells built, cells), then with
             ("walking", pairs done, pairs); a (cell, floor) pair is done when its row is
             known (a cell that is not walked, as it is built).
 
     Raises:
-        WalkMapError: the run has a walk map and `resume` is off.
+        WalkMapError: the run has a walk map and neither `resume` nor `restart` is on.
+        Busy: another process is making this run's walk map.
+        ArtefactError: the run's repertoire, or (resuming) its walk map, is damaged.
     """
-    from linkevo.workers.store.linkages import repertoire
-    from linkevo.workers.store.linkages import walk_map as stored_map
+    from linkevo.orchestrator.lease import Lease, Subject
 
-    refuse_overwrite(client, trial, resume)
-    with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
-        table = repertoire(client, trial.run_id, Path(tmp) / "in")
-        done = stored_map(client, trial.run_id, Path(tmp) / "done")
-        chosen = selection.choose(table, trial.mode)
-        batches = plan(
-            chosen, trial.mode, floors, done, as_evolved=selection.kind == "all", seconds=seconds
-        )
-        kept = (
-            []
-            if done is None
-            else [done[done["status"] != "failed"].reindex(columns=list(COLUMNS))]
-        )
-        rows: list[dict] = []
-        total = sum(len(b.cells) * len(b.floors) for b in batches)
-        cells, built = sum(len(b.cells) for b in batches), 0
-        last = time.monotonic()
-        try:
-            for n_built, new_rows in walk_rows(run, batches, seconds):
-                rows += new_rows
-                built += n_built
-                if tick is not None and built < cells:
-                    tick("building legs", built, cells)
-                elif tick is not None:
-                    tick("walking", len(rows), total)
-                if time.monotonic() - last > CHECKPOINT_S:
-                    _log(client, trial, table, kept, rows, Path(tmp), picture=False)
-                    last = time.monotonic()
-        finally:
-            result = _log(client, trial, table, kept, rows, Path(tmp), picture=True)
-    return result
+    refuse_overwrite(store, trial, resume, restart)
+    subject = Subject.walk_map(trial.run_id, trial.trial_key)
+    lease = Lease.take(store.client, store.uri, store.experiment_id, subject)
+    try:
+        with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
+            table = store.repertoire(trial.run_id, Path(tmp) / "in")
+            done = None if restart else store.walk_map(trial.run_id, Path(tmp) / "done")
+            chosen = selection.choose(table, trial.mode)
+            batches = plan(
+                chosen, trial.mode, floors, done, as_evolved=selection.kind == "all",
+                seconds=seconds,
+            )  # fmt: skip
+            if done is not None and not batches:
+                return WalkMapResult(done, walked=False)
+            kept = [] if done is None else [done[done["status"] != "failed"]]
+            rows: list[dict] = []
+            total = sum(len(b.cells) * len(b.floors) for b in batches)
+            cells, built = sum(len(b.cells) for b in batches), 0
+            last = time.monotonic()
+            try:
+                for n_built, new_rows in walk_rows(run, batches, seconds):
+                    rows += new_rows
+                    built += n_built
+                    if tick is not None and built < cells:
+                        tick("building legs", built, cells)
+                    elif tick is not None:
+                        tick("walking", len(rows), total)
+                    if time.monotonic() - last > CHECKPOINT_S:
+                        _log(store, trial, table, kept, rows, Path(tmp), picture=False)
+                        last = time.monotonic()
+            finally:
+                frame = _log(store, trial, table, kept, rows, Path(tmp), picture=True)
+    finally:
+        lease.release()
+    return WalkMapResult(frame, walked=True)
 
 
-def _log(client, trial, table, kept, rows, tmp: Path, *, picture: bool) -> pd.DataFrame:
+def _log(
+    store: RunStore,
+    trial: TrialRun,
+    table: pd.DataFrame,
+    kept: list[pd.DataFrame],
+    rows: list[dict],
+    tmp: Path,
+    *,
+    picture: bool,
+) -> pd.DataFrame:
     """Logs the walk map so far (rows kept from before and walked now) to the trial's run;
     returns it."""
-    frame = pd.concat([*kept, pd.DataFrame(rows, columns=list(COLUMNS))], ignore_index=True)
+    new = walk_map_frame(rows)
+    frame = pd.concat([*[k[list(COLUMNS)] for k in kept], new], ignore_index=True)
+    frame = frame.astype(new.dtypes.to_dict())  # an empty part leaves object columns
     frame = frame.drop_duplicates(["cell", "floor"], keep="last").sort_values(["floor", "cell"])
-    bins = [c for c in sorted(table.columns) if c.startswith("bin_")]
+    bins = bin_columns(table.columns)
     frame = frame.merge(table[["cell", *bins]], on="cell", how="left").reset_index(drop=True)
     path = tmp / layout.WALK_MAP
     write_parquet_atomic(path, {c: frame[c].to_numpy() for c in frame.columns})
+    client = store.client
     client.log_artifact(trial.run_id, str(path))
     if picture and not frame.empty:
         from linkevo.workers.plots.walk_map import draw_walk_map

@@ -1,11 +1,16 @@
-"""Provides the JSON linkage document: export one linkage, and rebuild it from a document."""
+"""Provides the JSON linkage document: export one linkage, parse one from text within
+bounds, and rebuild it from a document."""
 
 from __future__ import annotations
+
+import json
+import re
 
 import numpy as np
 
 from linkevo.sim import kernels
 from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.genome import MAX_BEAMS, N_GENES, N_NODES, validate_genomes
 from linkevo.sim.kinematics import Motion, check_angles, simulate
 from linkevo.sim.physical import physical_checks
@@ -16,6 +21,61 @@ FORMAT = "linkevo.linkage/2"
 READABLE_FORMATS = ("linkevo.linkage/1", FORMAT)
 DEFAULT_UNIT_MM = 8.0
 """One length unit is one LEGO Technic module: 8 mm hole pitch."""
+MAX_DOCUMENT_BYTES = 1_000_000
+"""The largest document read: one is about 10 kB (40 crank angles), 100 times that at the
+most crank angles a user would ask for; anything larger is not a linkage."""
+MAX_DOCUMENT_DEPTH = 16
+"""The deepest nesting of brackets a document may hold (one nests 4 deep): a file nested
+deeper is refused before Python's JSON parser recurses into it."""
+_STRINGS = re.compile(rb'"(?:[^"\\]|\\.)*"')
+
+
+class DocumentError(LinkevoError, ValueError):
+    """Text or a dict that is not a readable linkage document; the message names the
+    source and what is wrong."""
+
+
+def check_document_size(size: int, source: str) -> None:
+    """Raises DocumentError, naming `source`, when `size` bytes is too large a document."""
+    if size > MAX_DOCUMENT_BYTES:
+        raise DocumentError(
+            f"{source}: {size:,} bytes is not a linkage document (one is about 10 kB; "
+            f"allowed: at most {MAX_DOCUMENT_BYTES:,} bytes)"
+        )
+
+
+def parse_document(data: bytes, source: str) -> dict:
+    """Returns the linkage document `data` holds (JSON), checked for size and nesting
+    before it is parsed.
+
+    Args:
+        data: the file's bytes.
+        source: where they came from (a path), named in errors.
+
+    Raises:
+        DocumentError: larger than `MAX_DOCUMENT_BYTES`, nested deeper than
+            `MAX_DOCUMENT_DEPTH`, not UTF-8 JSON, or not a JSON object.
+    """
+    check_document_size(len(data), source)
+    brackets = np.frombuffer(_STRINGS.sub(b'""', data), dtype=np.uint8)
+    step = np.isin(brackets, (ord("["), ord("{"))).astype(np.int64) - np.isin(
+        brackets, (ord("]"), ord("}"))
+    )
+    depth = int(np.cumsum(step).max(initial=0))
+    if depth > MAX_DOCUMENT_DEPTH:
+        raise DocumentError(
+            f"{source}: nested {depth} levels deep, not a linkage document (allowed: at "
+            f"most {MAX_DOCUMENT_DEPTH})"
+        )
+    try:
+        doc = json.loads(data.decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise DocumentError(f"{source}: not a linkage document (not UTF-8 JSON: {exc})") from exc
+    if not isinstance(doc, dict):
+        raise DocumentError(
+            f"{source}: not a linkage document (a JSON {type(doc).__name__}, not an object)"
+        )
+    return doc
 
 
 def to_document(
@@ -103,21 +163,34 @@ def from_document(doc: dict) -> tuple[np.ndarray, str]:
     """Returns (genome (56,), mode) rebuilt from a document, after checking it.
 
     Raises:
-        ValueError: if the document is not a linkevo linkage document, or if the beams it
-            lists differ from those its genome decodes to (edited or from another version).
+        DocumentError: if the document is not a linkevo linkage document (a field missing
+            or of the wrong kind), or if the beams it lists differ from those its genome
+            decodes to (edited or from another version).
     """
     _check_format(doc, READABLE_FORMATS)
     mode = doc.get("mode", "paper")
     check_mode(mode)
-    genome = np.asarray(doc.get("genome"), dtype=np.float64)
+    try:
+        genome = np.asarray(doc.get("genome"), dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise DocumentError(f"document genome: not {N_GENES} numbers ({exc})") from exc
     if genome.shape != (N_GENES,):
-        raise ValueError(f"document genome must hold {N_GENES} numbers, got shape {genome.shape}")
+        raise DocumentError(
+            f"document genome must hold {N_GENES} numbers, got shape {genome.shape}"
+        )
     validate_genomes(genome.reshape(1, -1))
-    stored = np.array([b["length"] for b in doc.get("beams", [])], dtype=np.float64)
+    beams = doc.get("beams", [])
+    if not isinstance(beams, list) or not all(
+        isinstance(b, dict) and isinstance(b.get("length"), int | float) for b in beams
+    ):
+        raise DocumentError("document beams: allowed a list of beams, each with a length")
+    stored = np.array([b["length"] for b in beams], dtype=np.float64)
     batch = decode(genome.reshape(1, -1), mode)
     rebuilt = batch.beam_length[0, : int(batch.n_beams[0])]
     if stored.shape != rebuilt.shape or not np.allclose(stored, rebuilt, rtol=0, atol=1e-9):
-        raise ValueError("document beams do not match its genome: edited or from another version")
+        raise DocumentError(
+            "document beams do not match its genome: edited or from another version"
+        )
     return genome, mode
 
 
@@ -219,6 +292,6 @@ def _node_rows(node: dict) -> tuple[list[int], list[float]]:
 def _check_format(doc: object, allowed: tuple[str, ...]) -> None:
     found = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
     if found not in allowed:
-        raise ValueError(
+        raise DocumentError(
             f"not a readable linkage document: format is {found!r}, expected {' or '.join(allowed)}"
         )

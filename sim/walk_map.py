@@ -48,6 +48,8 @@ COLUMNS = (
 """A walk-map row, per cell and floor. status: "walked", "not buildable" (no whole-module
 rounding of the linkage turns; walked only with `as_evolved`), or "failed" (the reason is
 the error)."""
+STATUSES = frozenset({"walked", "not buildable", "failed"})
+"""Every status a walk-map row may have."""
 
 
 @dataclass(frozen=True)
@@ -230,6 +232,29 @@ def walk_cells(batch: CellBatch) -> list[dict]:
     ]
     cell_order = {int(c): i for i, c in enumerate(batch.cells)}
     return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))
+
+
+def walk_map_frame(rows: list[dict]):
+    """Returns walk-map rows (`COLUMNS`) as a pandas table with the columns' own dtypes
+    (int64 cell, bool breaks, float64 figures), also when there are none."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows, columns=list(COLUMNS))
+    return frame.astype(
+        {
+            "cell": "int64",
+            "floor": "object",
+            "status": "object",
+            "mean_distance_cm": "float64",
+            "breaks": "bool",
+            "reason": "object",
+            "leg": "object",
+            "bound_cm": "float64",
+            "torque_p95_of_stall": "float64",
+            "pin_force_p99_n": "float64",
+            "seconds": "float64",
+        }
+    )
 
 
 def _row(

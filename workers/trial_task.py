@@ -22,6 +22,7 @@ from linkevo.workers.ray_evaluator import ActorPoolEvaluator
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, patiently, use_quick_http
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial import TrialSpec, run_trial
 
 RETRYABLE_ERRORS: tuple[type[BaseException], ...] = (
@@ -170,14 +171,13 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
     A run that a resuming driver marked KILLED meanwhile is not marked FINISHED.
     """
     use_quick_http()
-    client = MlflowClient(job.tracking_uri)
+    store = RunStore(job.tracking_uri, experiment_id=job.experiment_id)
+    client = store.client
 
     def wait(call: Callable[[], T]) -> T:  # a silent server is waited for, within a limit
         return patiently(call, job.tracking_uri, job.outage_s)
 
-    earlier = wait(
-        lambda: layout.trial_runs(client, job.experiment_id, job.grid_id, trial_key=job.trial_key)
-    )
+    earlier = wait(lambda: store.trial_runs(job.grid_id, trial_key=job.trial_key))
     for run in earlier:
         if run.info.status == "FINISHED":
             return outcome_of(run)

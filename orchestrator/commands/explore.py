@@ -51,27 +51,17 @@ def handle(args: argparse.Namespace) -> int:
     import os
     import sys
 
-    from mlflow.tracking import MlflowClient
-
-    from linkevo.orchestrator.explore import (
-        GRID_DRAWN,
-        PAGE_ARTIFACT,
-        ExploreError,
-        explore,
-        resolve_repertoires,
-    )
-    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
+    from linkevo.orchestrator.explore import GRID_DRAWN, PAGE_ARTIFACT, explore
+    from linkevo.workers.store.runs import RunStore
 
     if args.drawn is not None and args.drawn < 1:
         raise CliError(f"--drawn {args.drawn}: give the number of cells to draw, >= 1")
     out = args.out if args.out is not None else Path("reports") / "explore" / f"{args.ref}.html"
     if out.suffix.lower() != ".html" or out.is_dir():
         raise CliError(f"--out {str(out)!r}: give a file name ending in .html")
-    client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
-    try:
-        trials, grid_id, parent = resolve_repertoires(client, args.ref, args.experiment)
-    except ExploreError as exc:
-        raise CliError(str(exc)) from exc
+    store = RunStore.open(args.tracking_uri, args.experiment)
+    found = store.repertoires(args.ref)
+    trials, grid_id, parent = found.trials, found.grid_id, found.parent_run_id
     if parent is None:
         log_to, drawn = args.ref, args.drawn
         title = f"linkevo explorer: {trials[0].trial_key} (run {args.ref})"
@@ -86,7 +76,7 @@ def handle(args: argparse.Namespace) -> int:
         print(f"[{done}/{len(trials)}] {trial.trial_key} (run {trial.run_id})", file=sys.stderr)
 
     log_to = None if args.no_log else log_to
-    explore(client, trials, out, title=title, drawn=drawn, log_to=log_to, progress=progress)
+    explore(store, trials, out, title=title, drawn=drawn, log_to=log_to, progress=progress)
     print(out)
     if log_to is not None:
         print(f"logged as {PAGE_ARTIFACT} to run {log_to}")

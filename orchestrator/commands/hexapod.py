@@ -287,11 +287,10 @@ def _ask_distance(repeat: int) -> float:
 
 def trial_handler(args: argparse.Namespace) -> int:
     """Walks the repeats, records the distances and logs a field-trial MLflow run."""
-    from mlflow.tracking import MlflowClient
-
     from linkevo.hardware.errors import HardwareError, StopRequested
     from linkevo.hardware.field_trial import ROBOTS, log_field_trial, walk_repeats
-    from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.store.linkages import LinkageRef, load_source
+    from linkevo.workers.store.runs import RunStore
     from linkevo.workers.store.tracking import resolve_tracking_uri
 
     if args.robot not in ROBOTS:
@@ -313,10 +312,7 @@ def trial_handler(args: argparse.Namespace) -> int:
     config = load_robot(args)
     show_motor_stops()
     uri = resolve_tracking_uri(args.tracking_uri)
-    try:
-        source = load_source(MlflowClient(tracking_uri=uri), LinkageRef.parse(args.linkage))
-    except LinkageError as exc:
-        raise CliError(str(exc)) from exc
+    source = load_source(RunStore.open(uri, args.experiment), LinkageRef.parse(args.linkage))
 
     def measure(repeat: int) -> float:
         return distances[repeat - 1] if distances is not None else _ask_distance(repeat)

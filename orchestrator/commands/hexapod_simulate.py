@@ -64,10 +64,9 @@ def simulate_handler(args: argparse.Namespace) -> int:
 
 def simulation_source(args: argparse.Namespace):
     """Returns (tracking URI, the source linkage) of `--linkage`."""
-    from mlflow.tracking import MlflowClient
-
     from linkevo.orchestrator.simulate import document_source
-    from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
+    from linkevo.workers.store.linkages import LinkageRef, load_source
+    from linkevo.workers.store.runs import RunStore
     from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 
     uri = resolve_tracking_uri(args.tracking_uri)
@@ -76,15 +75,9 @@ def simulation_source(args: argparse.Namespace):
         if not path.is_file():
             raise CliError(f"--linkage {args.linkage}: no such file")
         experiment_id = "" if args.no_log else ensure_experiment(uri, args.experiment)
-        try:
-            return uri, document_source(path, experiment_id)
-        except ValueError as exc:
-            raise CliError(f"--linkage {exc}") from exc
-    try:
-        ref = LinkageRef.parse(args.linkage)
-        return uri, load_source(MlflowClient(tracking_uri=uri), ref)
-    except LinkageError as exc:
-        raise CliError(str(exc)) from exc
+        return uri, document_source(path, experiment_id)
+    ref = LinkageRef.parse(args.linkage)
+    return uri, load_source(RunStore.open(uri, args.experiment), ref)
 
 
 def _simulation_text(source, robot: str, result: dict) -> str:
@@ -124,11 +117,9 @@ def _simulation_text(source, robot: str, result: dict) -> str:
 
 def study_handler(args: argparse.Namespace) -> int:
     """Predicts the study's Table I for a grid and prints it (and writes it with --out)."""
-    from mlflow.tracking import MlflowClient
-
     from linkevo.orchestrator.walk_study import predict_table_one
     from linkevo.workers.store.artifacts import write_text_atomic
-    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.runs import RunStore
 
     if not math.isfinite(args.seconds) or not 0 < args.seconds <= MAX_SIM_SECONDS:
         raise CliError(f"--seconds {args.seconds}: allowed a number in (0, {MAX_SIM_SECONDS:g}]")
@@ -141,20 +132,14 @@ def study_handler(args: argparse.Namespace) -> int:
     if args.model not in MODELS:
         raise CliError(f"--model {args.model!r}: allowed {', '.join(MODELS)}")
     config = load_robot(args)
-    uri = require_store(resolve_tracking_uri(args.tracking_uri))
-    try:
-        table = predict_table_one(
-            uri,
-            MlflowClient(tracking_uri=uri),
-            args.grid_id,
-            args.experiment,
-            config=config,
-            seconds=args.seconds,
-            repeats=args.repeats,
-            model=args.model,
-        )
-    except ValueError as exc:
-        raise CliError(str(exc)) from exc
+    table = predict_table_one(
+        RunStore.open(args.tracking_uri, args.experiment),
+        args.grid_id,
+        config=config,
+        seconds=args.seconds,
+        repeats=args.repeats,
+        model=args.model,
+    )
     if args.out is not None:
         write_text_atomic(args.out, table.to_csv(index=False))
         print(f"table: {args.out}")

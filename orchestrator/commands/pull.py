@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
 from linkevo.workers.store import run_layout as layout
+
+if TYPE_CHECKING:
+    from linkevo.workers.store.runs import RunStore
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -57,25 +61,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=handle)
 
 
-def grid_trials(client, experiment: str, grid_id: str, approach: str | None, fitness: str | None):
+def grid_trials(store: RunStore, grid_id: str, approach: str | None, fitness: str | None):
     """Returns the grid's FINISHED trials with a best loss, lowest first (of one approach
     and fitness when given).
 
     Raises:
-        CliError: naming an unknown experiment, grid, approach or fitness with the valid
-            choices, or asking for --fitness when the grid has more than one.
+        NotFound: naming an unknown experiment or grid with the grids there are.
+        CliError: naming an unknown approach or fitness with the valid choices, or asking
+            for --fitness when the grid has more than one.
     """
-    exp = client.get_experiment_by_name(experiment)
-    if exp is None:
-        raise CliError(f"--experiment {experiment!r} does not exist in this tracking store")
-    grids = layout.grid_runs(client, exp.experiment_id)
-    known = sorted({r.data.tags.get(layout.GRID_ID, "") for r in grids} - {""})
-    if not layout.ID_PATTERN.fullmatch(grid_id) or grid_id not in known:
-        raise CliError(
-            f"no grid {grid_id!r} in experiment {experiment!r}; known grids: "
-            f"{', '.join(known) or 'none'}"
-        )
-    trials = layout.trial_runs(client, exp.experiment_id, grid_id, status="FINISHED")
+    if not layout.ID_PATTERN.fullmatch(grid_id):
+        raise CliError(f"{grid_id!r} is not a grid id; allowed: letters, digits, '.', '_', '-'")
+    store.grid(grid_id)
+    trials = store.trial_runs(grid_id, status="FINISHED")
     choices = {
         key: sorted({r.data.tags.get(key, "") for r in trials} - {""})
         for key in (layout.APPROACH, layout.FITNESS)
@@ -103,7 +101,7 @@ def grid_trials(client, experiment: str, grid_id: str, approach: str | None, fit
     return sorted(kept, key=lambda r: (r.data.metrics["best_loss"], r.info.run_id))
 
 
-def best_design(client, trials: list) -> tuple[str, str, list[str]]:
+def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
     """Returns (linkage reference, what it is, what was passed over) for the lowest-loss
     buildable design among `trials` (lowest best loss first).
 
@@ -127,14 +125,14 @@ def best_design(client, trials: list) -> tuple[str, str, list[str]]:
         if found is not None and loss >= found[0]:
             break
         key = run.data.tags.get(layout.TRIAL_KEY, run_id)
-        genome, mode = from_document(load_source(client, LinkageRef(run_id)).document)
+        genome, mode = from_document(load_source(store, LinkageRef(run_id)).document)
         checks = to_document(genome, mode)["checks"]
         if checks["buildable"]:
             found = (loss, run_id, f"{key}'s best linkage (run {run_id}), loss {loss:.6g}")
             break
         passed_over.append(f"{key}'s best linkage, loss {loss:.6g}: {checks_line(checks)}")
         if run.data.tags.get(layout.APPROACH) in REPERTOIRE_APPROACHES:
-            cells = list_cells(client, run_id, 1, mode, buildable=True)
+            cells = list_cells(store, run_id, 1, mode, buildable=True)
             if not cells.empty and (found is None or cells.loss[0] < found[0]):
                 cell = int(cells.cell[0])
                 what = f"{key}'s cell {cell} (run {run_id}), loss {cells.loss[0]:.6g}"
@@ -149,17 +147,15 @@ def best_design(client, trials: list) -> tuple[str, str, list[str]]:
 
 def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo pull`."""
-    from mlflow.tracking import MlflowClient
-
     from linkevo.orchestrator.pull import predicted_walks, pull, walk_line
-    from linkevo.workers.store.linkages import LinkageError, LinkageRef, load_source
-    from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
+    from linkevo.workers.store.linkages import LinkageRef, load_source
+    from linkevo.workers.store.runs import RunStore
 
     _refuse_ignored(args)
-    client = MlflowClient(tracking_uri=require_store(resolve_tracking_uri(args.tracking_uri)))
+    store = RunStore.open(args.tracking_uri, args.experiment)
     text = args.ref
     if args.best:
-        trials = grid_trials(client, args.experiment, args.ref, args.approach, args.fitness)
+        trials = grid_trials(store, args.ref, args.approach, args.fitness)
         if args.any:
             text = trials[0].info.run_id
             key = trials[0].data.tags.get(layout.TRIAL_KEY)
@@ -167,24 +163,18 @@ def handle(args: argparse.Namespace) -> int:
             print(f"best design of grid {args.ref}, buildable or not: {key}'s best linkage "
                   f"(run {text}), loss {loss:.6g}", file=sys.stderr)  # fmt: skip
         else:
-            try:
-                text, what, passed_over = best_design(client, trials)
-            except LinkageError as exc:
-                raise CliError(str(exc)) from exc
+            text, what, passed_over = best_design(store, trials)
             print(f"best buildable design of grid {args.ref}: {what}", file=sys.stderr)
             for line in passed_over:
                 print(f"  passed over {line}", file=sys.stderr)
-    try:
-        ref = LinkageRef.parse(text)
-        if args.list is not None:
-            return _print_cells(client, ref, args.list, args.buildable)
-        source = load_source(client, ref)
-    except LinkageError as exc:
-        raise CliError(str(exc)) from exc
+    ref = LinkageRef.parse(text)
+    if args.list is not None:
+        return _print_cells(store, ref, args.list, args.buildable)
+    source = load_source(store, ref)
     cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
     print(f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
           file=sys.stderr)  # fmt: skip
-    walks = predicted_walks(client, source)
+    walks = predicted_walks(store, source)
     if walks:
         print(f"predicted walk: {walk_line(walks)}", file=sys.stderr)
     for path in pull(source, args.out or Path("pulled"), gif=args.gif, walks=walks):
@@ -207,7 +197,7 @@ def _refuse_ignored(args: argparse.Namespace) -> None:
             raise CliError(f"{option} works only with {what}")
 
 
-def _print_cells(client, ref, top: int, buildable: bool) -> int:
+def _print_cells(store: RunStore, ref, top: int, buildable: bool) -> int:
     """Prints a run's best repertoire cells with their checks (`linkevo pull RUN --list`)."""
     from linkevo.workers.store.linkages import list_cells
 
@@ -215,8 +205,8 @@ def _print_cells(client, ref, top: int, buildable: bool) -> int:
         raise CliError(f"--list {top}: give the number of cells to list, >= 1")
     if ref.cell is not None or ref.bins is not None:
         raise CliError("--list takes a run id (RUN_ID), not a cell")
-    mode = client.get_run(ref.run_id).data.params.get("mode", "paper")
-    table = list_cells(client, ref.run_id, top, mode, buildable)
+    mode = store.client.get_run(ref.run_id).data.params.get("mode", "paper")
+    table = list_cells(store, ref.run_id, top, mode, buildable)
     if table.empty:
         print(f"run {ref.run_id}: no {'buildable ' if buildable else ''}cell")
         return 0

@@ -74,7 +74,7 @@ def _store_options(parser: argparse.ArgumentParser) -> None:
 
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
-    from linkevo.orchestrator.report import GridNotFoundError, ReportNotLogged, build_report
+    from linkevo.orchestrator.report import ReportNotLogged, build_report
     from linkevo.orchestrator.report.build import report_folder
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
@@ -97,8 +97,6 @@ def handler(args: argparse.Namespace) -> int:
             log_to_mlflow=not args.no_log,
             first_trials=args.trials,
         )
-    except GridNotFoundError as exc:
-        raise CliError(str(exc)) from exc
     except ReportNotLogged as exc:
         print(f"linkevo report: {exc}", file=sys.stderr)
         return 1
@@ -113,7 +111,6 @@ def handler(args: argparse.Namespace) -> int:
 
 def compare_handler(args: argparse.Namespace) -> int:
     """Prints the two grids' comparison table (and writes it as CSV with --out)."""
-    from linkevo.orchestrator.report import GridNotFoundError
     from linkevo.orchestrator.report.compare import compare_grids, is_trials_csv
     from linkevo.workers.store.artifacts import write_text_atomic
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
@@ -130,10 +127,7 @@ def compare_handler(args: argparse.Namespace) -> int:
             raise CliError(f"grid id {grid!r} is invalid; allowed: letters, digits, '.', '_', '-'")
         elif uri is None:
             uri = require_store(resolve_tracking_uri(args.tracking_uri))
-    try:
-        table = compare_grids(uri, args.grid_a, args.grid_b, args.experiment)
-    except (GridNotFoundError, ValueError) as exc:
-        raise CliError(str(exc)) from exc
+    table = compare_grids(uri, args.grid_a, args.grid_b, args.experiment)
     if table.empty:
         print(f"grids {args.grid_a} and {args.grid_b} share no finished approach and fitness")
         return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np
@@ -151,8 +150,9 @@ def run_eval(args: argparse.Namespace) -> int:
 
 def run_show(args: argparse.Namespace) -> int:
     """Handles `linkevo show`."""
-    from linkevo.sim.linkage_doc import from_document
+    from linkevo.sim.linkage_doc import DocumentError, from_document
     from linkevo.workers.plots.linkage import draw_linkage
+    from linkevo.workers.store.artifacts import read_document
 
     check_writable(args.out, SUFFIXES)
     check_angles(args.angles)
@@ -160,9 +160,9 @@ def run_show(args: argparse.Namespace) -> int:
     if source.endswith(".json"):
         path = Path(source)
         try:
-            genome, mode = from_document(json.loads(path.read_text()))
-        except (OSError, json.JSONDecodeError, ValueError) as exc:
-            raise CliError(f"cannot load linkage document {source!r}: {exc}") from exc
+            genome, mode = from_document(read_document(path))
+        except DocumentError as exc:
+            raise DocumentError(f"cannot load linkage document {source!r}: {exc}") from exc
         mode = args.mode or mode
     else:
         file, _, row_text = source.partition(":")

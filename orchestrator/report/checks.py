@@ -3,17 +3,18 @@ approach and fitness: which of the study's answers a builder could build as simu
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.load import GridData, in_study_order
+from linkevo.orchestrator.report.load import GridData
 from linkevo.sim import decode, simulate
-from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.linkage_doc import DocumentError, from_document
 from linkevo.sim.physical import physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES
+from linkevo.workers.store.artifacts import read_document
+from linkevo.workers.store.runs import in_study_order
 
 TRIAL_CHECK_COLUMNS: tuple[str, ...] = (
     "trial_key",
@@ -69,8 +70,8 @@ def best_linkage_checks(grid: GridData) -> pd.DataFrame:
 def _read(path: str) -> tuple[np.ndarray, str] | None:
     """Returns (genome, mode) of a linkage document, or None when it is not one."""
     try:
-        return from_document(json.loads(Path(path).read_text(encoding="utf-8")))
-    except (ValueError, KeyError, OSError):
+        return from_document(read_document(Path(path)))
+    except DocumentError:
         return None
 
 

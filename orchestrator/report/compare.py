@@ -11,6 +11,7 @@ import pandas as pd
 
 from linkevo.orchestrator.report.load import finished_trials, load_grid
 from linkevo.orchestrator.report.stats import ALPHA, a12, holm, mann_whitney
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 
 COLUMNS: tuple[str, ...] = (
@@ -27,8 +28,8 @@ def compare_grids(
     report's `trials.csv` (a published grid compares without its store).
 
     Raises:
-        GridNotFoundError: when a grid is not in the store.
-        ValueError: when a trials table lacks the columns a report writes.
+        NotFound: when a grid is not in the store.
+        TrialsTableError: when a trials table lacks the columns a report writes.
     """
     with tempfile.TemporaryDirectory(prefix="linkevo-compare-") as cache:
         a, b = (
@@ -45,16 +46,24 @@ def is_trials_csv(grid: str) -> bool:
     return grid.endswith(".csv")
 
 
+class TrialsTableError(LinkevoError, ValueError):
+    """A trials table that is not one a report writes."""
+
+
 def read_trials_csv(path: str) -> pd.DataFrame:
     """Returns a report's trials table.
 
     Raises:
-        ValueError: naming the columns it lacks.
+        TrialsTableError: naming the file, when it is not a table or lacks a column.
     """
-    trials = pd.read_csv(path)
+    try:
+        trials = pd.read_csv(path)
+    except (OSError, ValueError) as exc:
+        problem = f"trials table {path!r} is not a readable CSV table ({exc})"
+        raise TrialsTableError(problem) from exc
     missing = [c for c in ("approach", "fitness", "status", "best_loss") if c not in trials]
     if missing:
-        raise ValueError(
+        raise TrialsTableError(
             f"trials table {path!r} lacks the columns {', '.join(missing)}; allowed: the "
             "trials.csv a report writes"
         )

@@ -17,13 +17,11 @@ from linkevo.workers.plots.repertoire import (
     LOSS_CMAP,
     LOSS_LABEL,
     STRIP_PATHS,
-    bin_columns,
     draw_paths,
-    fold_bins,
     loss_norm,
     select_paths,
-    space_of,
 )
+from linkevo.workers.store.tables import bin_columns, fold_bins, space_of
 
 CONVERGENCE_METRICS: tuple[tuple[str, str], ...] = (
     ("best_loss", "best loss"),

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from linkevo.sim.study import (
     is_pareto,
     label,
 )
+from linkevo.workers.store.artifacts import read_document
 
 REPRODUCED = "reproduced"
 DIRECTION_ONLY = "direction only"
@@ -144,7 +144,7 @@ def best_path_sizes(grid: GridData) -> pd.DataFrame:
     trials = grid.finished()
     rows = []
     for trial in trials[trials.best_linkage.notna()].itertuples():
-        doc = json.loads(Path(trial.best_linkage).read_text())
+        doc = read_document(Path(trial.best_linkage))
         path = doc["foot_path"]
         x, y = np.array(path["x"], dtype=float), np.array(path["y"], dtype=float)  # None: NaN
         if np.isfinite(x).any():

@@ -14,9 +14,9 @@ import numpy as np
 import pandas as pd
 
 from linkevo.orchestrator.config import ConfigError, from_dict
-from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.runs import NotFound, RunStore, latest_per_trial
 
 HISTORY_COLUMNS: tuple[str, ...] = (
     "iteration",
@@ -36,10 +36,6 @@ of the best paths (`sim.path_diversity`); NaN for a trial that did not log them.
 ARCHIVE_FILES: tuple[str, ...] = (layout.REPERTOIRE, layout.POPULATION)
 STATUS_MISSING = "MISSING"
 DOWNLOAD_THREADS = 8
-
-
-class GridNotFoundError(LinkevoError, LookupError):
-    """No grid parent run matches the requested grid id (or no grid exists at all)."""
 
 
 @dataclass(frozen=True)
@@ -91,52 +87,6 @@ def finished_trials(trials: pd.DataFrame) -> pd.DataFrame:
     return done.reset_index(drop=True)
 
 
-def in_study_order(
-    frame: pd.DataFrame,
-    approach: str = "approach",
-    fitness: str = "fitness",
-    then: str | None = None,
-) -> pd.DataFrame:
-    """Returns `frame`'s rows by approach and fitness in the study's order (`ordered`),
-    then by the numeric column `then` when given; stable otherwise."""
-    approaches = ordered(frame[approach].fillna(""), APPROACHES)
-    fitnesses = ordered(frame[fitness].fillna(""), FITNESSES)
-    keys = {
-        "_approach": frame[approach].fillna("").map(approaches.index),
-        "_fitness": frame[fitness].fillna("").map(fitnesses.index),
-    }
-    if then is not None:
-        keys["_then"] = pd.to_numeric(frame[then], errors="coerce").fillna(0)
-    return frame.assign(**keys).sort_values(list(keys), kind="stable").drop(columns=list(keys))
-
-
-def find_grid_run(client, grid_id: str | None, experiment: str) -> tuple[str, str]:
-    """Returns (grid_id, parent_run_id) of `grid_id`, or of the latest grid when None.
-
-    Raises:
-        GridNotFoundError: no such experiment or grid run; the message lists known grids.
-    """
-    exp = client.get_experiment_by_name(experiment)
-    if exp is None:
-        raise GridNotFoundError(f"no MLflow experiment {experiment!r} in this store")
-    runs = layout.grid_runs(client, exp.experiment_id, grid_id, limit=1)
-    if not runs:
-        known = layout.grid_runs(client, exp.experiment_id, limit=20)
-        names = sorted({r.data.tags.get(layout.GRID_ID, "?") for r in known})
-        wanted = "any grid" if grid_id is None else f"grid {grid_id!r}"
-        raise GridNotFoundError(
-            f"no {wanted} in experiment {experiment!r}; known grids: {names or 'none'}"
-        )
-    run = runs[0]
-    try:
-        found = layout.checked_id(
-            run.data.tags[layout.GRID_ID], f"the grid_id tag of run {run.info.run_id}"
-        )
-    except ValueError as exc:
-        raise GridNotFoundError(f"{exc}; pass a grid id that is one") from exc
-    return found, run.info.run_id
-
-
 def load_grid(
     tracking_uri: str,
     grid_id: str | None,
@@ -152,11 +102,10 @@ def load_grid(
     parallel into `cache_dir`. A trial without `metrics.csv` (a failed one, say) falls
     back to its logged metric histories.
     """
-    from mlflow.tracking import MlflowClient
-
-    client = MlflowClient(tracking_uri=tracking_uri)
-    grid_id, parent_id = find_grid_run(client, grid_id, experiment)
-    runs = search_trial_runs(client, grid_id, experiment)
+    store = RunStore(tracking_uri, experiment)
+    client = store.client
+    grid_id, parent_id = store.grid(grid_id)
+    runs = store.trial_table(grid_id)
     parent = client.get_run(parent_id)
     config = _grid_config(parent, cache_dir, tracking_uri)
     runs = latest_per_trial(runs)
@@ -176,7 +125,7 @@ def load_grid(
     history = _history_table(trials, histories)
     trials = _add_missing(trials, config)
     if trials.empty:
-        raise GridNotFoundError(f"grid {grid_id!r} has no trial runs and no config naming any")
+        raise NotFound(f"grid {grid_id!r} has no trial runs and no config naming any")
     return GridData(
         grid_id=grid_id,
         parent_run_id=parent_id,
@@ -187,44 +136,11 @@ def load_grid(
     )
 
 
-def search_trial_runs(client, grid_id: str, experiment: str) -> pd.DataFrame:
-    """Returns the grid's trial runs as `mlflow.search_runs` would, one row per run.
-
-    Columns run_id, status, artifact_uri, start_time, `tags.<name>` and `metrics.<name>`
-    (last values). Built from `MlflowClient` searches because the fluent
-    `mlflow.search_runs` reads the process-wide tracking URI, which a report must not
-    change.
-    """
-    exp = client.get_experiment_by_name(experiment)
-    records = []
-    for run in layout.trial_runs(client, exp.experiment_id, grid_id):
-        record = {
-            "run_id": run.info.run_id,
-            "status": run.info.status,
-            "artifact_uri": run.info.artifact_uri,
-            "start_time": run.info.start_time,
-        }
-        record.update({f"tags.{k}": v for k, v in run.data.tags.items()})
-        record.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
-        records.append(record)
-    return pd.DataFrame.from_records(records)
-
-
 def _grid_config(parent, cache_dir: Path, tracking_uri: str) -> dict:
     """Returns the parent run's `grid_config.json` ({} when the run has none)."""
     name = layout.GRID_CONFIG_JSON
     path = _artefact(parent.info.artifact_uri, name, cache_dir / "grid", tracking_uri)
     return json.loads(path.read_text()) if path is not None else {}
-
-
-def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
-    """Returns one run per trial key: a FINISHED one if any, else the latest started."""
-    if runs.empty:
-        return pd.DataFrame(columns=["run_id", "status", "artifact_uri", "start_time"])
-    runs = runs.assign(_done=(runs.status == "FINISHED").astype(int))
-    runs = runs.sort_values(["_done", "start_time"], ascending=False)
-    runs = runs.drop_duplicates(f"tags.{layout.TRIAL_KEY}").drop(columns="_done")
-    return runs.reset_index(drop=True)
 
 
 def _fetch_trial(

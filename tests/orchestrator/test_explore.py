@@ -16,10 +16,10 @@ from mlflow.entities import Param
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.cli import main
-from linkevo.orchestrator.explore import TrialRun, repertoire_view
+from linkevo.orchestrator.explore import repertoire_view
 from linkevo.sim import decode, simulate
 from linkevo.sim.physical import physical_checks
-from linkevo.workers.store.linkages import repertoire
+from linkevo.workers.store.runs import RunStore, TrialRun
 from linkevo.workers.store.tracking import ensure_experiment
 from linkevo.workers.trial import TrialSpec
 from tests.helpers.browser import chromium
@@ -40,7 +40,7 @@ def store(tmp_path_factory):
 
 
 def _view(uri: str, run_id: str, approach: str, tmp_path: Path, drawn=None) -> tuple:
-    table = repertoire(MlflowClient(uri), run_id, tmp_path)
+    table = RunStore(uri).repertoire(run_id, tmp_path)
     trial = TrialRun(run_id, f"{approach}/Fp/00", approach, "Fp", "paper", 40)
     return table, repertoire_view(table, trial, drawn)
 
@@ -274,7 +274,7 @@ def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, ml
     experiment = ensure_experiment(mlflow_server)
     run_id = served.create_run(experiment, tags=source.data.tags).info.run_id
     served.log_batch(run_id, params=[Param(k, v) for k, v in source.data.params.items()])
-    table = repertoire(MlflowClient(uri), runs["MAP-LIS"], tmp_path)
+    table = RunStore(uri).repertoire(runs["MAP-LIS"], tmp_path)
     table.to_parquet(tmp_path / "repertoire.parquet")
     served.log_artifact(run_id, str(tmp_path / "repertoire.parquet"))
     out = tmp_path / "page.html"

@@ -30,6 +30,7 @@ from linkevo.orchestrator.report.stats import holm, pairwise_tests
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.physical import physical_checks
+from linkevo.workers.store.tables import fold_bins
 from tests.helpers.report import GridSpec, write_grid
 
 SPEC = GridSpec(
@@ -254,10 +255,10 @@ def test_path_maps_take_the_best_path_per_downsampled_region(loaded):
 
 
 def test_fold_bins_nests_the_inner_dimensions_in_blocks():
-    rows, cols, side = fig.fold_bins(np.array([[1, 2, 3, 4], [9, 9, 9, 9]]), 10)
+    rows, cols, side = fold_bins(np.array([[1, 2, 3, 4], [9, 9, 9, 9]]), 10)
     assert (rows.tolist(), cols.tolist(), side) == ([13, 99], [24, 99], 100)
     with pytest.raises(ValueError, match="3-D"):
-        fig.fold_bins(np.zeros((1, 3), dtype=int), 10)
+        fold_bins(np.zeros((1, 3), dtype=int), 10)
 
 
 def test_findings_are_checked_with_their_numbers(grid, loaded):

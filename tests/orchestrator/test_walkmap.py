@@ -13,10 +13,9 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.cli import main
-from linkevo.orchestrator.explore import trial_run
 from linkevo.orchestrator.walkmap import Selection, run_in_process, walk_map
 from linkevo.sim.walk_map import build_cells
-from linkevo.workers.store.linkages import repertoire
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial import TrialSpec
 from tests.helpers.browser import chromium
 from tests.helpers.trials import record_trials
@@ -75,8 +74,9 @@ def test_walkmap_walks_the_chosen_cells_on_both_floors_and_logs_the_map(
     printed = capsys.readouterr().out
     frame = _walk_map(uri, run_id, tmp_path)
     client = MlflowClient(uri)
-    trial = trial_run(client, run_id)
-    table = repertoire(client, run_id, tmp_path / "rep")
+    store = RunStore(uri)
+    trial = store.repertoire_trial(run_id)
+    table = store.repertoire(run_id, tmp_path / "rep")
     expected = Selection.parse("best:4").choose(table, trial.mode)["cell"].tolist()
     assert sorted(frame["cell"].unique()) == sorted(expected)
     assert len(frame) == 8 and set(frame["floor"]) == {"flat", "carpet"}
@@ -102,7 +102,7 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
     assert main(["walkmap", run_id, "--cells", "best:6", "--tracking-uri", uri]) == 2
     assert "already has a walk map; add --resume" in capsys.readouterr().err
 
-    client = MlflowClient(uri)
+    store = RunStore(uri)
     walked_now: list[int] = []
 
     def counted(work, items):
@@ -111,9 +111,9 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
         return run_in_process(work, items)
 
     after = walk_map(
-        client, trial_run(client, run_id), counted, floors=("flat", "carpet"),
+        store, store.repertoire_trial(run_id), counted, floors=("flat", "carpet"),
         selection=Selection.parse("best:6"), resume=True, seconds=float(SECONDS),
-    )  # fmt: skip
+    ).frame  # fmt: skip
     assert len(walked_now) == 2 and not set(walked_now) & set(before["cell"])
     assert len(after) == 12
     old = after[after["cell"].isin(before["cell"])].sort_values(["floor", "cell"])

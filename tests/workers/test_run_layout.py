@@ -8,6 +8,8 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store import runs as runs_module
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment
 
 
@@ -44,13 +46,14 @@ def test_search_pages_through_every_run(tmp_path, monkeypatch):
         tags = {layout.KIND: layout.TRIAL, layout.GRID_ID: "g1"}
         client.create_run(experiment, tags={**tags, layout.TRIAL_KEY: f"EA/Fp/{index:02d}"})
     client.create_run(experiment, tags={layout.KIND: layout.TRIAL, layout.GRID_ID: "g2"})
-    monkeypatch.setattr(layout, "PAGE", 3)  # three pages for the seven runs
-    runs = layout.trial_runs(client, experiment, "g1")
+    monkeypatch.setattr(runs_module, "PAGE", 3)  # three pages for the seven runs
+    store = RunStore(uri)
+    runs = store.trial_runs("g1")
     assert sorted(r.data.tags[layout.TRIAL_KEY] for r in runs) == [
         f"EA/Fp/{i:02d}" for i in range(7)
     ]
-    assert len(layout.search(client, [experiment], layout.where(layout.TRIAL), limit=4)) == 4
-    one = layout.trial_runs(client, experiment, "g1", trial_key="EA/Fp/05")
+    assert len(store.search(layout.where(layout.TRIAL), limit=4)) == 4
+    one = store.trial_runs("g1", trial_key="EA/Fp/05")
     assert [r.data.tags[layout.TRIAL_KEY] for r in one] == ["EA/Fp/05"]
 
 

@@ -16,9 +16,9 @@ from matplotlib.colors import ListedColormap, Normalize
 from matplotlib.figure import Figure
 
 from linkevo.algorithms.pareto import non_dominated_ranks
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.study import is_map_elites, is_pareto
 from linkevo.workers.store.artifacts import atomic_path
+from linkevo.workers.store.tables import axis_names, bin_columns, fold_bins, space_of
 
 DOWNSAMPLED = 5
 """Side of the downsampled path maps (5 × 5 cells, as in the study)."""
@@ -44,53 +44,6 @@ def loss_norm(losses: np.ndarray) -> Normalize:
         return Normalize(0.0, 1.0)
     low, high = float(losses.min()), float(np.quantile(losses, CLIP_QUANTILE))
     return Normalize(low, high if high > low else low + 1.0)
-
-
-def fold_bins(bins: np.ndarray, resolution: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Returns (rows (N,), cols (N,), side) placing D-dimensional bins on a 2-D image.
-
-    The second descriptor runs along x (columns), the first up y (rows), as in the
-    explorer's default arrangement: 2-D bins (b0, b1) map to row b0, column b1. 4-D bins
-    (b0, b1, b2, b3) fold to row = b0 * R + b2, column = b1 * R + b3: b0 and b1 choose an
-    R × R block (outer axes), b2 and b3 the cell inside it (inner axes), so R = 10 gives a
-    100 × 100 image.
-
-    Args:
-        bins: (N, D) int bins, D in {2, 4}.
-        resolution: R, bins per dimension.
-    """
-    bins = np.asarray(bins, dtype=np.int64)
-    if bins.shape[1] == 2:
-        return bins[:, 0], bins[:, 1], resolution
-    if bins.shape[1] == 4:
-        rows = bins[:, 0] * resolution + bins[:, 2]
-        cols = bins[:, 1] * resolution + bins[:, 3]
-        return rows, cols, resolution * resolution
-    raise ValueError(f"can fold 2-D or 4-D bins only, got {bins.shape[1]}-D")
-
-
-def space_of(approach: str, dims: int) -> DescriptorSpace:
-    """Returns the approach's descriptor space (a generic one for an unknown approach)."""
-    space = DESCRIPTOR_SPACES.get(approach)
-    if space is not None and space.dims == dims:
-        return space
-    side = round(10_000 ** (1 / dims))
-    return DescriptorSpace(tuple(f"d{i}" for i in range(dims)), side, (1.0,) * dims)
-
-
-def axis_names(space: DescriptorSpace) -> tuple[str, str]:
-    """Returns the (x, y) axis names of a folded map as `fold_bins` places the bins: the
-    second descriptor along x, the first up y; on a 4-D map outer › inner on each axis."""
-    names = space.names
-    if space.dims == 2:
-        return names[1], names[0]
-    return f"{names[1]} › {names[3]}", f"{names[0]} › {names[2]}"
-
-
-def bin_columns(columns: pd.Index | list[str]) -> list[str]:
-    """Returns the archive's bin columns bin_0, bin_1, ... in order."""
-    found = [c for c in columns if c.startswith("bin_")]
-    return sorted(found, key=lambda c: int(c.removeprefix("bin_")))
 
 
 def select_paths(archive: pd.DataFrame, approach: str) -> pd.DataFrame:

@@ -1,6 +1,6 @@
 """Provides `draw_walk_map`: a repertoire's walk map, the distance each walked cell's robot
 walks in 10 s, a panel per floor, in the folded map layout of the loss maps
-(`workers.plots.repertoire.fold_bins`)."""
+(`workers.store.tables.fold_bins`)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import pandas as pd
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
-from linkevo.workers.plots.repertoire import axis_names, bin_columns, fold_bins, space_of
 from linkevo.workers.store.artifacts import atomic_path
+from linkevo.workers.store.tables import axis_names, bin_columns, fold_bins, space_of
 
 DISTANCE_CMAP = "viridis"
 """Far walkers bright yellow, short ones dark purple: brighter is better, as on the loss maps."""

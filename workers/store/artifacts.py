@@ -172,3 +172,27 @@ def write_parquet_atomic(
     table = columns_to_table(columns, float32)
     with atomic_path(path) as tmp:
         pq.write_table(table, tmp, compression="zstd")
+
+
+def read_document(path: Path) -> dict:
+    """Returns the linkage document in a JSON file, its size checked before it is read and
+    its nesting before it is parsed (`sim.linkage_doc.parse_document`).
+
+    Raises:
+        DocumentError: naming the file: missing, unreadable, too large or not a document.
+    """
+    from linkevo.sim.linkage_doc import (
+        MAX_DOCUMENT_BYTES,
+        DocumentError,
+        check_document_size,
+        parse_document,
+    )
+
+    path = Path(path)
+    try:
+        check_document_size(path.stat().st_size, str(path))
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_DOCUMENT_BYTES + 1)
+    except OSError as exc:
+        raise DocumentError(f"{path}: cannot read the linkage document ({exc.strerror})") from exc
+    return parse_document(data, str(path))

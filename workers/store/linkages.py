@@ -4,7 +4,6 @@ listing of a repertoire's best cells with their physical checks."""
 
 from __future__ import annotations
 
-import json
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,9 +14,11 @@ import numpy as np
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage_doc import to_document
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.artifacts import read_document
+from linkevo.workers.store.tables import bin_columns
 
 if TYPE_CHECKING:
-    from mlflow.tracking import MlflowClient
+    from linkevo.workers.store.runs import RunStore
 
 
 class LinkageError(LinkevoError, ValueError):
@@ -62,37 +63,29 @@ class SourceLinkage:
     document: dict
 
 
-def _download(client: MlflowClient, run_id: str, name: str, into: Path) -> Path:
-    from mlflow.exceptions import MlflowException
-
-    try:
-        return Path(client.download_artifacts(run_id, name, str(into)))
-    except (MlflowException, OSError) as exc:
-        raise LinkageError(f"run {run_id} has no artefact {name!r}") from exc
-
-
-def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
+def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
     """Returns the linkage document a reference points at, with its run's tags.
 
     A cell's genome is turned into a document with `sim.linkage_doc.to_document` in the
     run's `mode` (param; default "paper").
 
     Raises:
-        LinkageError: unknown run, missing artefact, or a cell not in the repertoire.
+        LinkageError: unknown run, or a cell not in the repertoire.
+        NotFound: the run lacks the artefact (its best linkage or repertoire).
     """
     from mlflow.exceptions import MlflowException
 
     try:
-        run = client.get_run(ref.run_id)
+        run = store.client.get_run(ref.run_id)
     except MlflowException as exc:
         raise LinkageError(f"--linkage: no MLflow run with id {ref.run_id!r}") from exc
     tags = run.data.tags
     with tempfile.TemporaryDirectory() as tmp:
         if ref.cell is None and ref.bins is None:
-            path = _download(client, ref.run_id, layout.BEST_JSON, Path(tmp))
-            document, cell = json.loads(path.read_text(encoding="utf-8")), None
+            path = store.download(ref.run_id, layout.BEST_JSON, Path(tmp))
+            document, cell = read_document(path), None
         else:
-            table = repertoire(client, ref.run_id, Path(tmp))
+            table = store.repertoire(ref.run_id, Path(tmp))
             cell, genome = _find_cell(table, ref)
             document = to_document(genome, run.data.params.get("mode", "paper"))
     return SourceLinkage(
@@ -105,35 +98,17 @@ def load_source(client: MlflowClient, ref: LinkageRef) -> SourceLinkage:
     )
 
 
-def repertoire(client: MlflowClient, run_id: str, tmp: Path):
-    """Returns the run's repertoire.parquet as a pandas table (a row per filled cell)."""
-    import pandas as pd
-
-    return pd.read_parquet(_download(client, run_id, layout.REPERTOIRE, tmp))
-
-
-def walk_map(client: MlflowClient, run_id: str, tmp: Path):
-    """Returns the run's walk map (`linkevo walkmap`) as a pandas table, or None when it
-    has none."""
-    import pandas as pd
-
-    try:
-        return pd.read_parquet(_download(client, run_id, layout.WALK_MAP, tmp))
-    except LinkageError:
-        return None
-
-
 def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:
     """Returns (flat cell, genome (56,)) of the repertoire row a cell reference names."""
-    bin_columns = sorted(c for c in table.columns if c.startswith("bin_"))
+    bins = bin_columns(table.columns)
     if ref.bins is not None:
-        if len(ref.bins) != len(bin_columns):
+        if len(ref.bins) != len(bins):
             raise LinkageError(
                 f"{ref.run_id}:{','.join(map(str, ref.bins))}: the repertoire has "
-                f"{len(bin_columns)} descriptors, so give {len(bin_columns)} bin coordinates"
+                f"{len(bins)} descriptors, so give {len(bins)} bin coordinates"
             )
         hit = np.ones(len(table), dtype=bool)
-        for column, value in zip(bin_columns, ref.bins, strict=True):
+        for column, value in zip(bins, ref.bins, strict=True):
             hit &= table[column].to_numpy() == value
         what = f"the cell at bins ({', '.join(map(str, ref.bins))})"
     else:
@@ -148,7 +123,7 @@ def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:
     return int(row["cell"]), np.asarray(row["genome"], dtype=float)
 
 
-def list_cells(client: MlflowClient, run_id: str, top: int, mode: str, buildable: bool = False):
+def list_cells(store: RunStore, run_id: str, top: int, mode: str, buildable: bool = False):
     """Returns the `top` lowest-loss cells of a run's repertoire with their physical checks.
 
     Args:
@@ -165,12 +140,12 @@ def list_cells(client: MlflowClient, run_id: str, top: int, mode: str, buildable
     from linkevo.sim.physical import physical_checks
 
     with tempfile.TemporaryDirectory() as tmp:
-        table = repertoire(client, run_id, Path(tmp))
+        table = store.repertoire(run_id, Path(tmp))
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
     genomes = np.stack(table["genome"].to_numpy()).astype(float)
     batch = decode(genomes, mode)
     checks = physical_checks(batch, simulate(batch))
-    bins = [c for c in sorted(table.columns) if c.startswith("bin_")]
+    bins = bin_columns(table.columns)
     out = pd.DataFrame(
         {
             "cell": table["cell"],

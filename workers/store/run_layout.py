@@ -2,19 +2,14 @@
 
 A grid is a parent run (kind "grid"); each trial is a nested run (kind "trial") tagged with
 its grid id and trial key; a field trial, real or simulated, is a run of kind
-"field_trial". Every module that writes or reads runs takes the names from here and
-searches through `search`, which pages through all results and quotes every value it puts
-in a filter (`docs/grid.md` shows the layout).
+"field_trial". Every module that writes or reads runs takes the names from here; searches
+go through `workers.store.runs.RunStore`, which pages through all results and puts values
+in a filter only through `where` and `quote` (`docs/grid.md` shows the layout).
 """
 
 from __future__ import annotations
 
 import re
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from mlflow.entities import Run
-    from mlflow.tracking import MlflowClient
 
 KIND = "linkevo.kind"
 """The tag every linkevo run carries: one of the kinds below."""
@@ -68,8 +63,6 @@ ID_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,63}")
 digits): no path separator, no leading dot, so an id can name a folder."""
 _KEY = re.compile(r"(?P<approach>[A-Za-z0-9_-]+)/(?P<fitness>[A-Za-z0-9_]+)/(?P<index>\d{2,})")
 _SAFE = re.compile(r"[A-Za-z0-9_./:+-]*")
-PAGE = 1000
-"""Runs per search page (MLflow's SQL stores accept up to 50,000)."""
 
 
 def trial_key(approach: str, fitness: str, index: int) -> str:
@@ -144,57 +137,3 @@ def where(kind: str | None = None, status: str | None = None, **tags: str) -> st
     if status:
         clauses.append(f"attributes.status = {quote(status)}")
     return " and ".join(clauses)
-
-
-def search(
-    client: MlflowClient,
-    experiment_ids: list[str],
-    filter_string: str,
-    *,
-    order_by: list[str] | None = None,
-    limit: int | None = None,
-) -> list[Run]:
-    """Returns every run matching `filter_string` (or the first `limit`), page by page."""
-    runs: list[Run] = []
-    token = None
-    while limit is None or len(runs) < limit:
-        size = PAGE if limit is None else min(PAGE, limit - len(runs))
-        page = client.search_runs(
-            experiment_ids, filter_string, order_by=order_by, max_results=size, page_token=token
-        )
-        runs.extend(page)
-        token = page.token
-        if not token:
-            break
-    return runs
-
-
-def trial_runs(
-    client: MlflowClient,
-    experiment_id: str,
-    grid_id: str,
-    *,
-    trial_key: str | None = None,
-    status: str | None = None,
-) -> list[Run]:
-    """Returns the grid's trial runs, optionally of one trial key and/or one status."""
-    tags = {GRID_ID: grid_id} | ({TRIAL_KEY: trial_key} if trial_key is not None else {})
-    return search(client, [experiment_id], where(TRIAL, status, **tags))
-
-
-def grid_runs(
-    client: MlflowClient,
-    experiment_id: str,
-    grid_id: str | None = None,
-    *,
-    limit: int | None = None,
-) -> list[Run]:
-    """Returns the grid runs (of one grid id when given), the latest started first."""
-    tags = {GRID_ID: grid_id} if grid_id is not None else {}
-    return search(
-        client,
-        [experiment_id],
-        where(GRID, **tags),
-        order_by=["attributes.start_time DESC"],
-        limit=limit,
-    )

@@ -1,0 +1,323 @@
+"""Provides `RunStore`: every question linkevo asks of an MLflow store, in one typed API.
+
+A command opens the store once (`RunStore.open`) and asks it for a grid's parent run, its
+trial runs (as runs, or as one table), the repertoire trials a reference names, a run's
+artefacts read back and checked (`workers.store.tables`). The searches page through all
+results and quote every value they put in a filter (`run_layout.where`). Optuna's
+storages, one object behind every study's reads, are the model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from linkevo.sim.errors import LinkevoError
+from linkevo.sim.study import DEFAULT_ANGLES, REPERTOIRE_APPROACHES
+from linkevo.workers.store import run_layout as layout
+
+if TYPE_CHECKING:
+    import pandas as pd
+    from mlflow.entities import Run
+    from mlflow.tracking import MlflowClient
+
+PAGE = 1000
+"""Runs per search page (MLflow's SQL stores accept up to 50,000)."""
+
+
+class NotFound(LinkevoError, LookupError):
+    """A grid, run or artefact the store does not hold; the message says what it holds."""
+
+
+@dataclass(frozen=True)
+class TrialRun:
+    """One repertoire trial: its run, tags and settings."""
+
+    run_id: str
+    trial_key: str
+    approach: str
+    fitness: str
+    mode: str
+    n_angles: int
+
+
+@dataclass(frozen=True)
+class Repertoires:
+    """The repertoire trials a reference names: one trial's (grid_id and parent_run_id
+    None), or every finished repertoire trial of a grid."""
+
+    trials: list[TrialRun]
+    grid_id: str | None = None
+    parent_run_id: str | None = None
+
+
+class RunStore:
+    """One MLflow store and linkevo's experiment in it.
+
+    Args:
+        uri: an absolute tracking URI (`tracking.resolve_tracking_uri`).
+        experiment: the experiment's name.
+        experiment_id: its id, where the caller knows it (a Ray task of a grid).
+    """
+
+    def __init__(
+        self, uri: str, experiment: str = "linkevo", *, experiment_id: str | None = None
+    ) -> None:
+        from mlflow.tracking import MlflowClient
+
+        self.uri = uri
+        self.experiment = experiment
+        self.client: MlflowClient = MlflowClient(tracking_uri=uri)
+        self._experiment_id = experiment_id
+
+    @classmethod
+    def open(cls, uri: str | None = None, experiment: str = "linkevo") -> RunStore:
+        """Returns the store at `uri` (default: MLFLOW_TRACKING_URI, else the embedded
+        one), which must exist: reading never creates a store.
+
+        Raises:
+            TrackingUriError: an unsupported URI, or no store (or a damaged one) there.
+        """
+        from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
+
+        return cls(require_store(resolve_tracking_uri(uri)), experiment)
+
+    @property
+    def experiment_id(self) -> str:
+        """The experiment's id.
+
+        Raises:
+            NotFound: the store has no such experiment.
+        """
+        if self._experiment_id is None:
+            found = self.client.get_experiment_by_name(self.experiment)
+            if found is None:
+                raise NotFound(f"no MLflow experiment {self.experiment!r} in the store {self.uri}")
+            self._experiment_id = found.experiment_id
+        return self._experiment_id
+
+    def search(
+        self, filter_string: str, *, order_by: list[str] | None = None, limit: int | None = None
+    ) -> list[Run]:
+        """Returns every run of the experiment matching `filter_string` (or the first
+        `limit`), page by page."""
+        runs: list[Run] = []
+        token = None
+        ids = [self.experiment_id]
+        while limit is None or len(runs) < limit:
+            size = PAGE if limit is None else min(PAGE, limit - len(runs))
+            page = self.client.search_runs(
+                ids, filter_string, order_by=order_by, max_results=size, page_token=token
+            )
+            runs.extend(page)
+            token = page.token
+            if not token:
+                break
+        return runs
+
+    def trial_runs(
+        self, grid_id: str, *, trial_key: str | None = None, status: str | None = None
+    ) -> list[Run]:
+        """Returns the grid's trial runs, optionally of one trial key and/or one status."""
+        tags = {layout.GRID_ID: grid_id} | ({layout.TRIAL_KEY: trial_key} if trial_key else {})
+        return self.search(layout.where(layout.TRIAL, status, **tags))
+
+    def grid_runs(
+        self, grid_id: str | None = None, *, first: bool = False, limit: int | None = None
+    ) -> list[Run]:
+        """Returns the grid runs (of one grid id when given), the latest started first
+        (`first`: the earliest first)."""
+        tags = {layout.GRID_ID: grid_id} if grid_id is not None else {}
+        order = "ASC" if first else "DESC"
+        return self.search(
+            layout.where(layout.GRID, **tags),
+            order_by=[f"attributes.start_time {order}"],
+            limit=limit,
+        )
+
+    def grid(self, grid_id: str | None = None) -> tuple[str, str]:
+        """Returns (grid_id, parent_run_id) of `grid_id`, or of the latest grid when None.
+
+        Raises:
+            NotFound: no such experiment or grid; the message lists the known grids.
+        """
+        runs = self.grid_runs(grid_id, limit=1)
+        if not runs:
+            known = sorted({r.data.tags.get(layout.GRID_ID, "?") for r in self.grid_runs(limit=20)})
+            wanted = "any grid" if grid_id is None else f"grid {grid_id!r}"
+            raise NotFound(
+                f"no {wanted} in experiment {self.experiment!r}; known grids: {known or 'none'}"
+            )
+        run = runs[0]
+        try:
+            found = layout.checked_id(
+                run.data.tags[layout.GRID_ID], f"the grid_id tag of run {run.info.run_id}"
+            )
+        except ValueError as exc:
+            raise NotFound(f"{exc}; pass a grid id that is one") from exc
+        return found, run.info.run_id
+
+    def trial_table(self, grid_id: str) -> pd.DataFrame:
+        """Returns the grid's trial runs as a table, one row per run: run_id, status,
+        artifact_uri, start_time, `tags.<name>` and `metrics.<name>` (last values)."""
+        import pandas as pd
+
+        records = []
+        for run in self.trial_runs(grid_id):
+            record = {
+                "run_id": run.info.run_id,
+                "status": run.info.status,
+                "artifact_uri": run.info.artifact_uri,
+                "start_time": run.info.start_time,
+            }
+            record.update({f"tags.{k}": v for k, v in run.data.tags.items()})
+            record.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
+            records.append(record)
+        return pd.DataFrame.from_records(records)
+
+    def repertoire_trial(self, run_id: str) -> TrialRun:
+        """Returns a repertoire trial's identity from its run.
+
+        Raises:
+            NotFound: no such run, or a run whose approach keeps no repertoire.
+        """
+        from mlflow.exceptions import MlflowException
+
+        try:
+            run = self.client.get_run(run_id)
+        except MlflowException as exc:
+            raise NotFound(f"{run_id!r} is neither a trial run nor a grid id here") from exc
+        tags, params = run.data.tags, run.data.params
+        approach = tags.get(layout.APPROACH, "unknown")
+        if approach not in REPERTOIRE_APPROACHES:
+            raise NotFound(
+                f"run {run_id} is a {approach} trial, which keeps a population, not a "
+                f"repertoire; give a trial of {', '.join(REPERTOIRE_APPROACHES)} or a grid id"
+            )
+        return TrialRun(
+            run_id=run_id,
+            trial_key=tags.get(layout.TRIAL_KEY, run_id),
+            approach=approach,
+            fitness=tags.get(layout.FITNESS, "unknown"),
+            mode=params.get("mode", "paper"),
+            n_angles=int(params.get("n_angles", DEFAULT_ANGLES)),
+        )
+
+    def grid_repertoires(self, grid_id: str) -> list[TrialRun]:
+        """Returns a grid's FINISHED repertoire trials in the study's order (one run per
+        trial key).
+
+        Raises:
+            NotFound: the grid has none.
+        """
+        approach, fitness, index = (f"tags.{t}" for t in layout.TRIAL_TAGS)
+        runs = self.trial_table(grid_id)
+        if runs.empty or approach not in runs:
+            raise NotFound(f"grid {grid_id} has no trial runs")
+        runs = latest_per_trial(runs)
+        runs = runs[(runs.status == "FINISHED") & runs[approach].isin(REPERTOIRE_APPROACHES)]
+        if runs.empty:
+            raise NotFound(
+                f"grid {grid_id} has no finished trial of {', '.join(REPERTOIRE_APPROACHES)}"
+            )
+        runs = in_study_order(runs, approach, fitness, index if index in runs else None)
+        return [self.repertoire_trial(run_id) for run_id in runs.run_id]
+
+    def repertoires(self, ref: str) -> Repertoires:
+        """Returns the repertoire trials a command's REF names: a trial's run id, or every
+        repertoire trial of a grid.
+
+        Raises:
+            NotFound: REF is not an id, or names neither a repertoire trial nor a grid.
+        """
+        if not layout.ID_PATTERN.fullmatch(ref):  # it goes into an MLflow filter string
+            raise NotFound(
+                f"{ref!r} is neither a run id nor a grid id; allowed: letters, digits, '.', "
+                "'_', '-'"
+            )
+        try:
+            grid_id, parent = self.grid(ref)
+        except NotFound as no_grid:
+            try:
+                return Repertoires([self.repertoire_trial(ref)])
+            except NotFound as exc:
+                raise NotFound(f"{exc} ({no_grid})") from exc
+        return Repertoires(self.grid_repertoires(grid_id), grid_id, parent)
+
+    def download(self, run_id: str, name: str, into: Path) -> Path:
+        """Returns a local copy of a run's artefact `name`.
+
+        Raises:
+            NotFound: the run has no such artefact.
+        """
+        from mlflow.exceptions import MlflowException
+
+        try:
+            return Path(self.client.download_artifacts(run_id, name, str(into)))
+        except (MlflowException, OSError) as exc:
+            raise NotFound(
+                f"run {run_id} has no artefact {name!r}: its trial did not finish, or the "
+                "store's artefacts were moved or deleted"
+            ) from exc
+
+    def repertoire(self, run_id: str, into: Path) -> pd.DataFrame:
+        """Returns the run's repertoire (a row per filled cell), checked by content.
+
+        Raises:
+            NotFound: the run has no repertoire.
+            ArtefactError: it is damaged.
+        """
+        from linkevo.workers.store.tables import read_repertoire
+
+        path = self.download(run_id, layout.REPERTOIRE, into)
+        return read_repertoire(path, run_id, layout.REPERTOIRE)
+
+    def walk_map(self, run_id: str, into: Path) -> pd.DataFrame | None:
+        """Returns the run's walk map (`linkevo walkmap`), checked by content, or None
+        when it has none.
+
+        Raises:
+            ArtefactError: it is damaged.
+        """
+        from linkevo.workers.store.tables import read_walk_map
+
+        if layout.WALK_MAP not in {a.path for a in self.client.list_artifacts(run_id)}:
+            return None
+        return read_walk_map(self.download(run_id, layout.WALK_MAP, into), run_id)
+
+
+def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
+    """Returns one run per trial key of a trial table: a FINISHED one if any, else the
+    latest started."""
+    import pandas as pd
+
+    if runs.empty:
+        return pd.DataFrame(columns=["run_id", "status", "artifact_uri", "start_time"])
+    runs = runs.assign(_done=(runs.status == "FINISHED").astype(int))
+    runs = runs.sort_values(["_done", "start_time"], ascending=False)
+    runs = runs.drop_duplicates(f"tags.{layout.TRIAL_KEY}").drop(columns="_done")
+    return runs.reset_index(drop=True)
+
+
+def in_study_order(
+    frame: pd.DataFrame,
+    approach: str = "approach",
+    fitness: str = "fitness",
+    then: str | None = None,
+) -> pd.DataFrame:
+    """Returns `frame`'s rows by approach and fitness in the study's order (`ordered`),
+    then by the numeric column `then` when given; stable otherwise."""
+    import pandas as pd
+
+    from linkevo.sim.study import APPROACHES, FITNESSES, ordered
+
+    approaches = ordered(frame[approach].fillna(""), APPROACHES)
+    fitnesses = ordered(frame[fitness].fillna(""), FITNESSES)
+    keys = {
+        "_approach": frame[approach].fillna("").map(approaches.index),
+        "_fitness": frame[fitness].fillna("").map(fitnesses.index),
+    }
+    if then is not None:
+        keys["_then"] = pd.to_numeric(frame[then], errors="coerce").fillna(0)
+    return frame.assign(**keys).sort_values(list(keys), kind="stable").drop(columns=list(keys))
