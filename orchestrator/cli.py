@@ -104,7 +104,10 @@ def main(argv: list[str] | None = None) -> int:
     """Runs the CLI and returns the process exit code."""
     quiet_libraries()
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, or a value an option refuses (argparse printed it)
+        return int(exc.code or 0)
     try:
         return int(args.func(args) or 0)
     except LinkevoError as exc:

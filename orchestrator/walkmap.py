@@ -163,22 +163,32 @@ def run_on_ray(work: Callable[[Any], Any], items: list, in_flight: int) -> Itera
         yield ray.get(ready[0])
 
 
-def refuse_overwrite(store: RunStore, trial: TrialRun, resume: bool, restart: bool) -> None:
-    """Raises WalkMapError when the trial's run has a walk map and neither `resume` nor
-    `restart` is on, so nothing is overwritten unasked; raises `lease.Busy` when another
-    process is making its walk map."""
+def check_before_walking(store: RunStore, trial: TrialRun, resume: bool, restart: bool) -> None:
+    """Refuses a walk map that cannot be made as asked, before anything is walked: another
+    process is making it, the run has one and neither `resume` nor `restart` is on (so
+    nothing is overwritten unasked), or what it would read is missing or damaged (the
+    repertoire; resuming, the walk map).
+
+    Raises:
+        Busy: another process holds the run's walk-map lease.
+        WalkMapError: the run has a walk map and neither `resume` nor `restart` is on.
+        NotFound, ArtefactError: the repertoire or the walk map to resume is missing or
+            damaged.
+    """
     from linkevo.orchestrator.lease import Lease, Subject
 
     subject = Subject.walk_map(trial.run_id, trial.trial_key)
     Lease.refuse_if_held(store.client, store.experiment_id, subject)
-    if resume or restart:
-        return
     names = {a.path for a in store.client.list_artifacts(trial.run_id)}
-    if layout.WALK_MAP in names:
+    if layout.WALK_MAP in names and not (resume or restart):
         raise WalkMapError(
             f"run {trial.run_id} ({trial.trial_key}) already has a walk map; add --resume "
             "to walk only the cells it lacks, or --restart to walk the map anew"
         )
+    with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
+        store.repertoire(trial.run_id, Path(tmp) / "in")
+        if resume:
+            store.walk_map(trial.run_id, Path(tmp) / "done")
 
 
 @dataclass(frozen=True)
@@ -224,7 +234,7 @@ def walk_map(
     """
     from linkevo.orchestrator.lease import Lease, Subject
 
-    refuse_overwrite(store, trial, resume, restart)
+    check_before_walking(store, trial, resume, restart)
     subject = Subject.walk_map(trial.run_id, trial.trial_key)
     lease = Lease.take(store.client, store.uri, store.experiment_id, subject)
     try:

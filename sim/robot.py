@@ -13,6 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+WALK_SECONDS = 10.0
+"""How long a walk lasts unless told: Table I's 10 s."""
 LEG_SLOTS = ("left-front", "left-middle", "left-rear", "right-front", "right-middle", "right-rear")
 """Where a leg is mounted; a motor's `name` in the robot config picks its slot."""
 TRIPOD_OFFSETS_DEG = {

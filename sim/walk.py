@@ -24,7 +24,7 @@ import numpy as np
 from linkevo.sim.gait import GaitConfig, PhasePid
 from linkevo.sim.lean_model import LEAN_TIMESTEP_S, Coupling, build_lean_robot
 from linkevo.sim.leg import Leg
-from linkevo.sim.robot import LEG_SLOTS, TRIPOD_OFFSETS_DEG, Floor, Frame, Motor
+from linkevo.sim.robot import LEG_SLOTS, TRIPOD_OFFSETS_DEG, WALK_SECONDS, Floor, Frame, Motor
 from linkevo.sim.walk_model import TIMESTEP_S, RobotModel, build_robot
 
 MODELS = {"lean": (build_lean_robot, LEAN_TIMESTEP_S), "full": (build_robot, TIMESTEP_S)}
@@ -65,7 +65,7 @@ class WalkSettings:
             faster on the lean model; walk maps use it, Table I's predictions are dense.
     """
 
-    seconds: float = 10.0
+    seconds: float = WALK_SECONDS
     settle_s: float = 0.5
     model: str = "lean"
     timestep: float | None = None

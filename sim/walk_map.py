@@ -23,11 +23,9 @@ from typing import Any
 import numpy as np
 
 from linkevo.sim.leg import LegError, LegRecipe, leg_recipe
-from linkevo.sim.robot import FLOORS
+from linkevo.sim.robot import FLOORS, WALK_SECONDS
 from linkevo.sim.walk import WalkSettings, walk
 
-WALK_SECONDS = 10.0
-"""A walk-map walk's length, as Table I's."""
 WALK_MAP_STEP_S = 0.004
 """A walk-map walk's physics step, twice Table I's: it ranks cells as Table I's walks do
 (docs/walking.md) at about 60 % of the cost; a walk that blows up is walked again at half
@@ -243,12 +241,12 @@ def walk_map_frame(rows: list[dict]):
     return frame.astype(
         {
             "cell": "int64",
-            "floor": "object",
-            "status": "object",
+            "floor": "str",
+            "status": "str",
             "mean_distance_cm": "float64",
             "breaks": "bool",
-            "reason": "object",
-            "leg": "object",
+            "reason": "str",
+            "leg": "str",
             "bound_cm": "float64",
             "torque_p95_of_stall": "float64",
             "pin_force_p99_n": "float64",

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import shlex
 import signal
 import subprocess
 import sys
 from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands.options import linkevo_command
 
 if TYPE_CHECKING:
     from linkevo.orchestrator.config import GridConfig
@@ -133,44 +133,26 @@ def run_grid(args: argparse.Namespace) -> int:
     print(
         f"\nResults are in MLflow ({result.tracking_uri}), experiment '{grid.config.experiment}'."
     )
-    print(f"Open the UI with:  {_linkevo()} ui{_ui_flag(result.tracking_uri)}")
+    print(f"Open the UI with:  {linkevo_command('ui', *_ui_flag(result.tracking_uri))}")
     return 1 if result.failed else 0
 
 
 def _resume_command(args: argparse.Namespace) -> str:
     """Returns the command line that completes this grid: the same config and options,
     with --resume."""
-    words = [*shlex.split(_linkevo()), "grid", str(args.config)]
+    words = ["grid", str(args.config)]
     for override in args.overrides:
         words += ["--set", override]
     for flag, value in (("--tracking-uri", args.tracking_uri), ("--address", args.address)):
         if value is not None:
             words += [flag, value]
-    return shlex.join([*words, "--resume"])
+    return linkevo_command(*words, "--resume")
 
 
-def _linkevo() -> str:
-    """Returns how to run linkevo again as this process was run: `linkevo` when that name
-    finds this program, else its path (an environment that is not activated), else
-    `python -m linkevo.orchestrator`."""
-    import os
-    import shutil
-    from pathlib import Path
-
-    program = Path(sys.argv[0])
-    if program.name != "linkevo":
-        return shlex.join([sys.executable, "-m", "linkevo.orchestrator"])
-    found = shutil.which("linkevo")
-    if found and Path(found).resolve() == program.resolve():
-        return "linkevo"
-    shown = os.path.relpath(program) if program.resolve().is_relative_to(Path.cwd()) else program
-    return shlex.quote(str(shown))
-
-
-def _ui_flag(uri: str) -> str:
+def _ui_flag(uri: str) -> list[str]:
     from linkevo.workers.store.tracking import default_tracking_uri
 
-    return "" if uri == default_tracking_uri() else f" --tracking-uri '{uri}'"
+    return [] if uri == default_tracking_uri() else ["--tracking-uri", uri]
 
 
 def run_ui(args: argparse.Namespace) -> int:

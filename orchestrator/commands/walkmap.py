@@ -60,7 +60,7 @@ def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo walkmap`."""
     from tqdm import tqdm
 
-    from linkevo.orchestrator.walkmap import Selection, refuse_overwrite, run_on_ray, walk_map
+    from linkevo.orchestrator.walkmap import Selection, check_before_walking, run_on_ray, walk_map
     from linkevo.workers.store.runs import RunStore
 
     selection = Selection.parse(args.cells)
@@ -68,7 +68,7 @@ def handle(args: argparse.Namespace) -> int:
     store = RunStore.open(args.tracking_uri, args.experiment)
     trials = store.repertoires(args.ref).trials
     for trial in trials:  # before Ray starts or anything is walked
-        refuse_overwrite(store, trial, args.resume, args.restart)
+        check_before_walking(store, trial, args.resume, args.restart)
 
     import ray
 

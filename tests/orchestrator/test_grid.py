@@ -74,14 +74,17 @@ def test_dry_run_prints_the_plan_and_starts_nothing(tmp_path, capsys):
 
 
 def test_the_commands_it_prints_run_as_this_one_was_run(monkeypatch, tmp_path):
-    from linkevo.orchestrator.commands.grid import _linkevo
+    from linkevo.orchestrator.commands.options import linkevo_command
 
     venv_linkevo = Path(sys.executable).parent / "linkevo"
     monkeypatch.setattr(sys, "argv", [str(venv_linkevo), "grid"])
     monkeypatch.setenv("PATH", "/usr/bin:/bin")  # an environment that is not activated
     monkeypatch.chdir(tmp_path)
-    assert _linkevo() == str(venv_linkevo)
+    assert linkevo_command("ui") == f"{venv_linkevo} ui"
     monkeypatch.setenv("PATH", f"{venv_linkevo.parent}:/usr/bin:/bin")
-    assert _linkevo() == "linkevo"
+    assert linkevo_command("walkmap", "a b") == "linkevo walkmap 'a b'"
+    monkeypatch.chdir(venv_linkevo.parents[2])  # the checkout: a path the shell runs as typed
+    monkeypatch.setenv("PATH", "/usr/bin:/bin")
+    assert linkevo_command() == str(venv_linkevo.relative_to(venv_linkevo.parents[2]))
     monkeypatch.setattr(sys, "argv", ["-c", "grid"])
-    assert _linkevo().endswith("-m linkevo.orchestrator")
+    assert linkevo_command().endswith("-m linkevo.orchestrator")

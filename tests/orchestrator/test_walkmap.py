@@ -43,10 +43,14 @@ def _walk_map(uri: str, run_id: str, tmp: Path) -> pd.DataFrame:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--floor", "ice"], "--floor 'ice': allowed flat, carpet, both"),
+        (
+            ["--floor", "ice"],
+            "--floor: invalid choice: 'ice' (choose from 'flat', 'carpet', 'both')",
+        ),
         (["--cells", "best:0"], "--cells 'best:0': allowed buildable, all, best:K"),
         (["--cells", "most"], "--cells 'most'"),
-        (["--seconds", "0"], "--seconds 0.0: allowed a number in (0, 600]"),
+        (["--seconds", "0"], "--seconds: '0' is not allowed: a number of seconds in (0, 600]"),
+        (["--resume", "--restart"], "--restart: not allowed with argument --resume"),
     ],
 )
 def test_bad_input_is_refused_before_any_work(store, args, message, capsys):
@@ -191,16 +195,20 @@ def test_pull_prints_and_writes_a_walked_cells_predicted_walks(store, ray_local,
     assert "Predicted walk: flat" in (out / "build_sheet.md").read_text()
 
 
-def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_local, tmp_path):
+def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(
+    store, ray_local, tmp_path, capsys
+):
+    import os
     import re
     import select
+    import shlex
     import signal
     import subprocess
     import sys
 
     uri, runs = store
     run_id = runs["MAP-WH"]
-    linkevo = Path(sys.executable).parent / "linkevo"
+    linkevo = Path(sys.executable).parent / "linkevo"  # not on PATH: printed as its path
     args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "1", "--floor", "flat",
             "--tracking-uri", uri]  # fmt: skip
     # An ignored SIGINT is inherited across exec; the walk map's Ctrl-C is what is tested, so
@@ -208,6 +216,8 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
     proc = subprocess.Popen(
         [str(linkevo), *args],
         stderr=subprocess.PIPE,
+        cwd=tmp_path,
+        env={**os.environ, "PATH": "/usr/bin:/bin"},
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     seen, deadline = b"", time.monotonic() + 120
@@ -218,12 +228,141 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(store, ray_l
     proc.send_signal(signal.SIGINT)
     _, rest = proc.communicate(timeout=60)
     assert proc.returncode == 130
-    assert f"linkevo walkmap {run_id} --resume" in (seen + rest).decode()
+    printed = (seen + rest).decode()
+    again = [run_id, "--floor", "flat", "--cells", "best:30", "--seconds", "1",
+             "--tracking-uri", uri, "--resume"]  # fmt: skip
+    assert f"Complete the map with:  {linkevo} walkmap {shlex.join(again)}\n" in printed, printed
     partial = _walk_map(uri, run_id, tmp_path / "partial")
     assert 1 <= len(partial) < 30
 
-    assert main([*args, "--resume"]) == 0
+    assert main(["walkmap", *again]) == 0  # the printed line, as the user runs it
+    assert main(["walkmap", *again]) == 0  # a complete map: said so, nothing walked
+    assert "the walk map is complete" in capsys.readouterr().out
     complete = _walk_map(uri, run_id, tmp_path / "complete")
     assert len(complete) == 30 and complete["cell"].is_unique
     kept = complete.set_index("cell").loc[partial["cell"], "mean_distance_cm"].to_numpy()
     assert np.array_equal(kept, partial["mean_distance_cm"].to_numpy(), equal_nan=True)
+
+
+def test_a_second_walk_map_of_one_run_is_refused_and_no_row_is_lost(store, ray_local, tmp_path):
+    import subprocess
+    import sys
+
+    uri, runs = store
+    run_id = runs["MAP-WH"]
+    first = [
+        sys.executable,
+        "-m",
+        "linkevo.orchestrator",
+        "walkmap",
+        run_id,
+        "--restart",
+        "--cells",
+        "best:12",
+        "--floor",
+        "flat",
+        "--seconds",
+        "1",
+        "--tracking-uri",
+        uri,
+    ]
+    proc = subprocess.Popen(first, stderr=subprocess.PIPE, stdout=subprocess.PIPE)  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not _holds_lease(uri, run_id):
+        assert time.monotonic() < deadline and proc.poll() is None, "the first never started"
+        time.sleep(0.2)
+    second = subprocess.run(
+        [*first[:5], "--resume", "--floor", "carpet", "--tracking-uri", uri],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err.decode()[-2000:]
+    assert second.returncode == 2, second.stderr
+    assert (
+        f"the walk map of run {run_id} (MAP-WH/Fp/00) is being made by another linkevo "
+        f"walkmap pid {proc.pid}" in second.stderr
+    )
+    assert "Traceback" not in second.stderr
+    frame = _walk_map(uri, run_id, tmp_path)
+    assert len(frame) == 12 and set(frame["floor"]) == {"flat"}  # the first's, whole
+
+
+def _holds_lease(uri: str, run_id: str) -> bool:
+    from linkevo.workers.store import run_layout as layout
+
+    tags = MlflowClient(uri).get_experiment_by_name("linkevo").tags
+    return layout.lease_tag(f"walkmap.{run_id}") in tags
+
+
+def _damaged(path: Path, how: str) -> Path:
+    """Writes a damaged walk map, as a bad disk, a bad edit or another program would."""
+    good = pd.DataFrame(
+        {"cell": [1, 2], "floor": ["flat", "flat"], "status": ["walked", "walked"],
+         "mean_distance_cm": [10.0, 20.0], "breaks": [False, False], "reason": ["", ""],
+         "leg": ["LEGO build"] * 2, "bound_cm": [30.0, 30.0], "torque_p95_of_stall": [0.1, 0.1],
+         "pin_force_p99_n": [5.0, 5.0], "seconds": [1.0, 1.0]}
+    )  # fmt: skip
+    if how == "empty":
+        path.write_bytes(b"")
+    elif how == "truncated":
+        good.to_parquet(path)
+        path.write_bytes(path.read_bytes()[:200])
+    elif how == "random":
+        path.write_bytes(np.random.default_rng(0).bytes(5000))
+    elif how == "wrong columns":
+        good.drop(columns=["breaks"]).to_parquet(path)
+    elif how == "NaN distance":
+        good.assign(mean_distance_cm=[np.nan, 20.0]).to_parquet(path)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("how", "problem"),
+    [
+        ("empty", "is not a readable parquet table"),
+        ("truncated", "is not a readable parquet table"),
+        ("random", "is not a readable parquet table"),
+        ("wrong columns", "lacks the column(s) breaks"),
+        ("NaN distance", "has walks that do not break but have no finite distance"),
+    ],
+)
+def test_a_damaged_walk_map_is_refused_naming_the_file_its_run_and_the_remedy(
+    store, tmp_path, how, problem, capsys
+):
+    uri, runs = store
+    client = MlflowClient(uri)
+    run_id = client.create_run(
+        client.get_run(runs["MAP-LIS"]).info.experiment_id,
+        tags=client.get_run(runs["MAP-LIS"]).data.tags,
+    ).info.run_id
+    table = RunStore(uri).repertoire(runs["MAP-LIS"], tmp_path / "rep")
+    table.to_parquet(tmp_path / "repertoire.parquet")
+    client.log_artifact(run_id, str(tmp_path / "repertoire.parquet"))
+    client.log_artifact(run_id, str(_damaged(tmp_path / "walkmap.parquet", how)))
+    cell = int(table["cell"].iloc[0])
+    for command in (
+        ["walkmap", run_id, "--resume"],
+        ["explore", run_id, "--no-log", "--out", str(tmp_path / "page.html")],
+        ["pull", f"{run_id}:{cell}", "--out", str(tmp_path / "pulled")],
+    ):
+        assert main([*command, "--tracking-uri", uri]) == 2, command
+        err = capsys.readouterr().err
+        assert f"walkmap.parquet of run {run_id} {problem}" in err, err
+        assert f"linkevo walkmap {run_id} --restart" in err
+    assert not (tmp_path / "page.html").exists() and not (tmp_path / "pulled").exists()
+
+
+def test_a_missing_or_damaged_repertoire_is_refused_by_name(store, tmp_path, capsys):
+    uri, runs = store
+    client = MlflowClient(uri)
+    source = client.get_run(runs["MAP-LIS"])
+    bare = client.create_run(source.info.experiment_id, tags=source.data.tags).info.run_id
+    for command in (["walkmap", bare], ["explore", bare, "--no-log"]):
+        assert main([*command, "--tracking-uri", uri]) == 2
+        err = capsys.readouterr().err
+        assert f"run {bare} has no artefact 'repertoire.parquet'" in err and "Traceback" not in err
+    table = RunStore(uri).repertoire(runs["MAP-LIS"], tmp_path / "rep")
+    table.assign(genome=[np.full(56, 2.0)] * len(table)).to_parquet(tmp_path / "repertoire.parquet")
+    client.log_artifact(bare, str(tmp_path / "repertoire.parquet"))
+    assert main(["walkmap", bare, "--tracking-uri", uri]) == 2
+    assert "has genomes that are not 56 genes in [0, 1)" in capsys.readouterr().err

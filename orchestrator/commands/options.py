@@ -1,0 +1,104 @@
+"""Provides the options several commands share, each declared and checked once: the store
+(`--tracking-uri`, `--experiment`), a walk's `--seconds`, `--floor` (from
+`sim.robot.FLOORS`), Ray's `--address`, the robot's `--config`; and `linkevo_command`,
+how to run linkevo again as this process was run (for the lines that resume a command).
+
+A value an option refuses stops the command in argparse, before anything starts, with the
+value and what is allowed (exit 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+from pathlib import Path
+
+from linkevo.sim.robot import FLOORS, WALK_SECONDS
+from linkevo.workers.store.tracking import DEFAULT_EXPERIMENT
+
+MAX_SECONDS = 600.0
+"""The longest walk a command takes (ten minutes of simulated walking)."""
+ROBOT_CONFIG = "configs/hexapod.toml"
+"""The robot config when `--config` is not given: the one linkevo ships (`linkevo.configs`)."""
+
+__all__ = [
+    "DEFAULT_EXPERIMENT",
+    "MAX_SECONDS",
+    "ROBOT_CONFIG",
+    "WALK_SECONDS",
+    "linkevo_command",
+]
+
+
+def store(parser: argparse.ArgumentParser) -> None:
+    """Adds `--tracking-uri` and `--experiment`."""
+    parser.add_argument(
+        "--tracking-uri",
+        default=None,
+        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
+    )
+    parser.add_argument("--experiment", default=DEFAULT_EXPERIMENT, help="MLflow experiment")
+
+
+def walk_seconds(text: str) -> float:
+    """Returns a walk's length in seconds, a number in (0, `MAX_SECONDS`].
+
+    Raises:
+        argparse.ArgumentTypeError: naming the value and what is allowed.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or not 0 < value <= MAX_SECONDS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not allowed: a number of seconds in (0, {MAX_SECONDS:g}]"
+        )
+    return value
+
+
+def seconds(parser: argparse.ArgumentParser, what: str = "seconds per walk") -> None:
+    """Adds `--seconds`: a walk's length (default: Table I's 10 s)."""
+    parser.add_argument("--seconds", type=walk_seconds, default=WALK_SECONDS, help=what)
+
+
+def floor(parser: argparse.ArgumentParser, *, required: bool = False, default: str = "flat"):
+    """Adds `--floor`, one of `sim.robot.FLOORS`."""
+    if required:
+        parser.add_argument("--floor", required=True, choices=tuple(FLOORS), help="the floor")
+    else:
+        parser.add_argument("--floor", default=default, choices=tuple(FLOORS), help="the floor")
+
+
+def ray_address(parser: argparse.ArgumentParser) -> None:
+    """Adds `--address`: the Ray cluster to join."""
+    parser.add_argument("--address", help="Ray address (default: RAY_ADDRESS, else start one)")
+
+
+def robot_config(parser: argparse.ArgumentParser) -> None:
+    """Adds `--config`: the robot's TOML (default: the one linkevo ships)."""
+    what = f"robot TOML (default: the shipped {ROBOT_CONFIG})"
+    parser.add_argument("--config", type=Path, default=None, help=what)
+
+
+def linkevo_command(*words: str) -> str:
+    """Returns a linkevo command line, quoted for a shell, as the user can run it: `linkevo`
+    when that name finds this program, else its path (an environment that is not
+    activated), else `python -m linkevo.orchestrator`."""
+    import os
+    import shutil
+
+    program = Path(sys.argv[0])
+    if program.name != "linkevo":
+        head = [sys.executable, "-m", "linkevo.orchestrator"]
+    else:
+        found = shutil.which("linkevo")
+        if found and Path(found).resolve() == program.resolve():
+            head = ["linkevo"]
+        elif program.resolve().is_relative_to(Path.cwd()):
+            head = [os.path.relpath(program)]
+        else:
+            head = [str(program)]
+    return shlex.join([*head, *words])
