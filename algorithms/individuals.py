@@ -62,7 +62,8 @@ class Individuals:
             KeyError: a field is missing.
             ValueError: naming the field, when its dtype, shape or values are not those
                 `to_state` writes (real numbers, one row per genome, genes in [0, 1),
-                finite losses, error counts >= 0).
+                finite losses, mutation strengths and descriptors, error counts >= 0,
+                foot coordinates finite or NaN at failed angles).
         """
         arrays = {f.name: np.asarray(state[f"{prefix}.{f.name}"]) for f in fields(Individuals)}
         n = arrays["genome"].shape[0] if arrays["genome"].ndim == 2 else -1
@@ -84,4 +85,12 @@ class Individuals:
             raise bad("loss", "allowed: finite losses")
         if (arrays["error"] < 0).any():
             raise bad("error", "allowed: failed-angle counts >= 0")
+        sigma = arrays["sigma"]
+        if not (np.isfinite(sigma) & (sigma >= 0)).all():
+            raise bad("sigma", "allowed: finite mutation strengths >= 0")
+        if not np.isfinite(arrays["desc"]).all():
+            raise bad("desc", "allowed: finite descriptors")
+        for name in ("foot_x", "foot_y"):
+            if np.isinf(arrays[name]).any():
+                raise bad(name, "allowed: finite coordinates, NaN at failed angles")
         return Individuals(**arrays)

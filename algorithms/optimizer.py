@@ -293,8 +293,14 @@ class BaseOptimizer:
                 + ", ".join(f"{k} (saved {saved.get(k)!r}, here {mine.get(k)!r})" for k in diff)
             )
         self._rng = decode_rng(state["optimizer.rng"])
-        self._evaluations = int(state["optimizer.evaluations"])
-        self._iteration = int(state["optimizer.iteration"])
+        evaluations = int(state["optimizer.evaluations"])
+        iteration = int(state["optimizer.iteration"])
+        if iteration < 0 or evaluations < iteration * self.batch_size or evaluations < 0:
+            raise ValueError(
+                f"optimizer.iteration {iteration} and optimizer.evaluations {evaluations}: "
+                f"allowed: iteration >= 0 and evaluations >= iteration x batch ({self.batch_size})"
+            )
+        self._evaluations, self._iteration = evaluations, iteration
         self._pending = None
         self._load_state(state)
         self._common.load_state_dict(state)

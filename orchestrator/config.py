@@ -26,6 +26,21 @@ from linkevo.workers.store.outage import OUTAGE_LIMIT_S
 
 STUDY_TRIALS = 10
 """Trials per approach and fitness in the study."""
+MAX_TRIALS = 1000
+"""The most trials per approach and fitness: a grid of the study's 14 cells at this many is
+14,000 runs in the store (the study ran 10, its statistics 30)."""
+MAX_NAME = 200
+"""The longest experiment name (MLflow's stores keep at most 256 characters)."""
+COUNT_LIMITS = {
+    "trials": MAX_TRIALS,
+    "max_concurrent_trials": 100_000,
+    "max_retries": 100,
+    "evaluators_per_trial": 1024,
+    "checkpoint_every": 1_000_000,
+    "n_angles": 3600,
+}
+"""The largest value each count may take: counts are bounded before any work, so a slip
+of the finger (`trials=1000000000`) is refused rather than expanded."""
 MAX_ITERATIONS = 1_000_000
 """The most iterations (evaluations / batch_size) a trial may run: each logs a row of
 metrics to MLflow and to metrics.csv, so a budget beyond it fills the store, not the
@@ -215,6 +230,9 @@ def _validate(cfg: GridConfig) -> None:
     _check_int(cfg, "n_angles", MIN_ANGLES)
     for key in ("seed", "max_concurrent_trials", "max_retries", "evaluators_per_trial"):
         _check_int(cfg, key, 0)
+    for key, most in COUNT_LIMITS.items():
+        if getattr(cfg, key) > most:
+            raise _fail(key, getattr(cfg, key), f"allowed: at most {most:,}")
     _check_int(cfg, "walk_rerank", 0)
     if cfg.walk_rerank > MAX_WALK_RERANK:
         raise _fail("walk_rerank", cfg.walk_rerank, f"allowed: 0 to {MAX_WALK_RERANK}")
@@ -237,8 +255,9 @@ def _validate(cfg: GridConfig) -> None:
     for key in ("experiment", "tracking_uri", "work_dir"):
         if not isinstance(getattr(cfg, key), str):
             raise _fail(key, getattr(cfg, key), "allowed: a string")
-    if not cfg.experiment:
-        raise _fail("experiment", cfg.experiment, "allowed: a non-empty name")
+    if not cfg.experiment or len(cfg.experiment) > MAX_NAME or not cfg.experiment.isprintable():
+        shown = cfg.experiment if len(cfg.experiment) <= 40 else f"{cfg.experiment[:40]}..."
+        raise _fail("experiment", shown, f"allowed: a name of 1 to {MAX_NAME} printable characters")
     if not isinstance(cfg.options, dict):
         raise _fail("options", cfg.options, "allowed: a table of per-approach option tables")
     for approach, table in cfg.options.items():

@@ -40,7 +40,7 @@ from linkevo.workers.store.outage import (
     use_quick_http,
 )
 from linkevo.workers.store.runs import RunStore
-from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
+from linkevo.workers.store.tracking import check_store_file, ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial import TrialSpec
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
 
@@ -90,6 +90,13 @@ def check_tracking_uri(uri: str, timeout: float = 5.0) -> None:
         "allowed: an http(s):// MLflow server that answers /health, a sqlite:/// URI, "
         "or a folder for an embedded store"
     )
+
+
+def check_store(uri: str) -> None:
+    """Refuses a store the grid cannot write, before anything is written: a tracking
+    server that does not answer, an embedded store file that is damaged."""
+    check_tracking_uri(uri)
+    check_store_file(uri)
 
 
 def check_store_holds_grid(record: Path, uri: str, grid: Grid) -> None:
@@ -211,7 +218,7 @@ def launch(
     specs = trial_specs(grid)
     check_restart(grid, restart, resume)
     uri = resolve_tracking_uri(cfg.tracking_uri or None)
-    check_tracking_uri(uri)
+    check_store(uri)
     local = uses_local_ray(address)
     if local:  # a local instance starts later, with this machine's CPUs
         cluster = Cluster.this_machine()

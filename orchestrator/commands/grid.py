@@ -103,7 +103,7 @@ def run_grid(args: argparse.Namespace) -> int:
 
     if args.dry_run:
         driver.trial_specs(grid)  # refuses what the launch would refuse
-        driver.check_tracking_uri(resolve_tracking_uri(grid.config.tracking_uri or None))
+        driver.check_store(resolve_tracking_uri(grid.config.tracking_uri or None))
         print(describe(grid, dry_run_cluster(args.address)))
         return 0
     try:

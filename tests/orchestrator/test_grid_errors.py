@@ -33,9 +33,13 @@ def closed_port() -> int:
         (None, "trial_cpus=nan", "'trial_cpus' = nan is invalid"),
         (None, "max_seconds=inf", "'max_seconds' = inf is invalid: allowed: a finite number"),
         (None, "batch_size=1000000000;evaluations=1000000000", "a batch needs about"),
-        (None, "n_angles=100000000", "'n_angles' = 100,000,000: a batch needs about"),
+        (None, "n_angles=100000000", "'n_angles' = 100000000 is invalid: allowed: at most 3,600"),
         (None, "evaluations=1000000000000000", "allowed: at most batch_size x 1,000,000"),
         ("trials = 2 # caf\xe9\n", None, "not UTF-8 text (byte 16 is 0xe9)"),
+        (None, "trials=1000000000", "'trials' = 1000000000 is invalid: allowed: at most 1,000"),
+        (None, "max_retries=1000000", "'max_retries' = 1000000 is invalid: allowed: at most 100"),
+        (None, f'experiment="{"x" * 600}"', "allowed: a name of 1 to 200 printable characters"),
+        (None, 'experiment="a\\u001b[2J"', "allowed: a name of 1 to 200 printable characters"),
     ],
 )
 @pytest.mark.parametrize("dry_run", [False, True])
@@ -57,6 +61,34 @@ def test_bad_grid_input_fails_before_anything_starts(
     assert (code, expected in err) == (2, True), err
     assert not ray.is_initialized()
     assert not store.exists()
+
+
+def _truncated_sqlite(path) -> bytes:
+    import sqlite3
+
+    with sqlite3.connect(path) as db:
+        db.execute("create table t (x text)")
+        db.executemany("insert into t values (?)", [("x" * 1000,)] * 100)
+    return path.read_bytes()[: path.stat().st_size // 2]
+
+
+@pytest.mark.parametrize(
+    ("damage", "expected"),
+    [
+        (lambda path: b"", "is empty (0 bytes)"),
+        (_truncated_sqlite, "is damaged"),
+        (lambda path: b"this is not a database, it is a note", "is not an MLflow (SQLite) store"),
+    ],
+)
+def test_dry_run_checks_the_store_as_a_launch_does(tmp_path, capsys, damage, expected):
+    store = tmp_path / "store" / "m.db"
+    store.parent.mkdir()
+    content = damage(store)
+    store.write_bytes(content)
+    path = tiny_config_file(tmp_path, tracking_uri=f"sqlite:///{store}")
+    assert main(["grid", str(path), "--dry-run"]) == 2
+    assert expected in capsys.readouterr().err
+    assert store.read_bytes() == content
 
 
 def test_ui_refuses_a_missing_store(tmp_path, capsys):

@@ -295,6 +295,13 @@ def _damage(state: dict[str, np.ndarray], how: str) -> None:
         state["archive.genome"] = state["archive.genome"].astype(str).astype("<U3")
     elif how == "negative row count":
         state["checkpoint.rows"] = np.array(-4, dtype=np.int64)
+    elif how == "negative iteration":
+        state["optimizer.iteration"] = np.array(-5, dtype=np.int64)
+    elif how == "negative sigma":
+        state["archive.sigma"] = -state["archive.sigma"] - 0.1
+    elif how == "infinite foot":
+        state["archive.foot_x"] = state["archive.foot_x"].copy()
+        state["archive.foot_x"][0, 0] = np.inf
 
 
 @pytest.mark.parametrize(
@@ -307,6 +314,9 @@ def _damage(state: dict[str, np.ndarray], how: str) -> None:
         ("missing key", "missing entry 'archive.loss'"),
         ("genomes as strings", "archive.genome (<U3"),
         ("negative row count", "impossible (rows -4"),
+        ("negative iteration", "optimizer.iteration -5"),
+        ("negative sigma", "archive.sigma (float64"),
+        ("infinite foot", "archive.foot_x (float64"),
     ],
 )
 def test_a_damaged_checkpoint_is_refused_naming_the_file_and_the_remedy(
@@ -364,3 +374,30 @@ def test_walk_rerank_walks_the_best_linkages_and_keeps_the_furthest(tmp_path: Pa
     assert document["meta"]["cell"] == best["cell"]
     genome, _ = from_document(document)
     assert np.array_equal(genome, best["genome"])
+
+
+def test_a_checkpoint_whose_header_claims_more_than_it_holds_is_refused(tmp_path: Path) -> None:
+    """A forged array header (a shape of 10**12 rows) is refused by name before any
+    memory is taken for it."""
+    import io
+    import zipfile
+
+    spec = spec_for("MAP-LIS", evaluations=2 * BATCH)
+    run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path)
+    path = tmp_path / "checkpoint" / "state.npz"
+    state = read_npz(path)
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f8", "fortran_order": False, "shape": (10**12, 56)}
+    )
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, array in state.items():
+            member = io.BytesIO()
+            np.lib.format.write_array(member, array, allow_pickle=False)
+            forged = header.getvalue() + b"\0" * 64
+            archive.writestr(
+                f"{name}.npy", forged if name == "archive.genome" else member.getvalue()
+            )
+    with pytest.raises(CheckpointError) as caught:
+        run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path, resume=True)
+    assert "array 'archive.genome' claims shape (1000000000000, 56)" in str(caught.value)

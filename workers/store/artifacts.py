@@ -140,7 +140,32 @@ def write_npz_atomic(path: Path, arrays: dict[str, np.ndarray]) -> None:
 
 
 def read_npz(path: Path) -> dict[str, np.ndarray]:
-    """Returns every array of an `.npz` file, loaded without pickle."""
+    """Returns every array of an `.npz` file, loaded without pickle, each array's header
+    checked against the bytes it holds before memory is taken for it.
+
+    Raises:
+        ValueError: naming an array whose header claims more data than the file holds
+            (a damaged or forged file: a shape of (10**12, 56), say).
+    """
+    import zipfile
+
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                read_header = (
+                    np.lib.format.read_array_header_1_0
+                    if version == (1, 0)
+                    else np.lib.format.read_array_header_2_0
+                )
+                shape, _, dtype = read_header(member)
+                claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                held = info.file_size - member.tell()
+                if claimed > held:
+                    raise ValueError(
+                        f"array {info.filename.removesuffix('.npy')!r} claims shape {shape} "
+                        f"({claimed:,} bytes) but holds {held:,} bytes"
+                    )
     with np.load(path, allow_pickle=False) as data:
         return {name: data[name] for name in data.files}
 
