@@ -76,13 +76,15 @@ def build_parser() -> argparse.ArgumentParser:
 def quiet_libraries() -> None:
     """Keeps the libraries' routine messages off the terminal, so that what linkevo prints
     is what the user must know: MLflow's INFO lines (creating a store's tables, say) and
-    download progress bars, and Ray's notice that token authentication is on (it is, and
-    the embedded instance needs nothing from the user). Set in the environment, so Ray
+    download progress bars, Ray's notice that token authentication is on (it is, and
+    the embedded instance needs nothing from the user), and the colour codes of Ray's
+    worker-log prefixes (`EscapedStream` would show them as text). Set in the environment, so Ray
     workers and MLflow subprocesses inherit it; a value the user set is kept."""
     import logging
     import os
 
     os.environ.setdefault("MLFLOW_LOGGING_LEVEL", "WARNING")
+    os.environ.setdefault("RAY_COLOR_PREFIX", "0")  # Ray's worker-log prefixes uncoloured
     os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
     notice = "ray._private.authentication.authentication_token_setup"
     logging.getLogger(notice).setLevel(logging.ERROR)
@@ -100,8 +102,49 @@ def _store_damage(exc: BaseException) -> str | None:
     return None
 
 
+_CONTROLS = {
+    code: f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+    for code in (
+        *range(0x00, 0x20),
+        *range(0x7F, 0xA0),
+        *range(0x202A, 0x202F),  # bidirectional embeddings and overrides
+        *range(0x2066, 0x206A),  # bidirectional isolates
+    )
+    if chr(code) not in "\t\n\r"
+}
+"""Characters that would steer a terminal (escape sequences, bells, backspaces, text
+direction), each mapped to its visible escape."""
+
+
+class EscapedStream:
+    """A text stream that writes control characters as visible escapes (`\\x1b`), so
+    text read from a store or a document (a run's tags, a linkage's meta) can neither
+    clear the screen nor retitle the window. Tabs, newlines and carriage returns (progress
+    bars) pass as they are."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        self._stream.write(text.translate(_CONTROLS))
+        return len(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Runs the CLI and returns the process exit code."""
+    """Runs the CLI and returns the process exit code; everything it prints goes through
+    `EscapedStream`."""
+    streams = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = EscapedStream(sys.stdout), EscapedStream(sys.stderr)
+    try:
+        return _main(argv)
+    finally:
+        sys.stdout, sys.stderr = streams
+
+
+def _main(argv: list[str] | None) -> int:
     quiet_libraries()
     parser = build_parser()
     try:

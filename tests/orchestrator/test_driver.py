@@ -132,6 +132,45 @@ def test_small_grid_ends_with_one_finished_run_per_trial_key(ray_local, tmp_path
         launch(grid, resume=True, progress=False)
 
 
+def test_a_copied_or_moved_store_keeps_working_and_never_writes_into_the_other(
+    ray_local, tmp_path, capsys
+):
+    import shutil
+
+    from linkevo.orchestrator.cli import main
+
+    grid = tiny_grid(tmp_path, approaches=["MAP-LIS"], fitnesses=["Fp"], trials=1)
+    first = launch(grid, progress=False)
+    original = tmp_path / "store" / "mlartifacts"
+    summaries = {p: p.read_bytes() for p in original.rglob("grid_summary.json")}
+    assert len(summaries) == 1
+    shutil.copytree(tmp_path / "store", tmp_path / "copy")
+    copied = f"sqlite:///{tmp_path / 'copy' / 'mlflow.db'}"
+    again = launch(tiny_grid(tmp_path, tracking_uri=copied, approaches=["MAP-LIS"],
+                             fitnesses=["Fp"], trials=1), resume=True, progress=False)  # fmt: skip
+    assert again.parent_run_id == first.parent_run_id and not again.failed
+    assert {p: p.read_bytes() for p in original.rglob("grid_summary.json")} == summaries
+    assert list((tmp_path / "copy" / "mlartifacts").rglob("grid_summary.json"))
+
+    (tmp_path / "copy").rename(tmp_path / "moved")
+    moved = f"sqlite:///{tmp_path / 'moved' / 'mlflow.db'}"
+    out = tmp_path / "pulled"
+    assert main(["pull", grid.grid_id, "--best", "--any", "--tracking-uri", moved,
+                 "--out", str(out)]) == 0  # fmt: skip
+    assert (out / "linkage.json").is_file()
+    page = tmp_path / "page.html"
+    assert main(["explore", grid.grid_id, "--tracking-uri", moved, "--out", str(page)]) == 0
+    assert page.stat().st_size > 1000
+    assert not (tmp_path / "copy").exists()  # nothing written where the store was
+
+    shutil.copy(tmp_path / "store" / "mlflow.db", tmp_path / "lonely.db")  # no artefacts
+    lonely = f"sqlite:///{tmp_path / 'lonely.db'}"
+    capsys.readouterr()
+    assert main(["pull", grid.grid_id, "--best", "--any", "--tracking-uri", lonely]) == 2
+    err = capsys.readouterr().err
+    assert f"records its artefacts in {original}, not beside it" in err, err
+
+
 def test_failed_trial_is_reported_and_the_others_finish(ray_local, tmp_path):
     grid = tiny_grid(tmp_path, approaches=["EA"], fitnesses=["Fp"], trials=2)
     uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"

@@ -108,6 +108,7 @@ def require_store(uri: str) -> str:
             "(linkevo grid configs/quick.toml) or pass --tracking-uri"
         )
     check_store_file(uri)
+    follow_moved_store(uri)
     return uri
 
 
@@ -157,11 +158,72 @@ def check_store_file(uri: str) -> None:
         )
 
 
+ARTEFACT_FOLDER = "mlartifacts"
+"""The folder beside an embedded store's database that holds its runs' artefacts."""
+_LOCATIONS = (
+    ("experiments", "artifact_location"),
+    ("runs", "artifact_uri"),
+    ("logged_models", "artifact_location"),
+)
+"""Where MLflow's sqlite schema records artefact locations (absolute URIs)."""
+
+
 def artifact_root_for(uri: str) -> str | None:
     """Returns the local artifact folder URI for an embedded sqlite store, else None."""
     if uri.startswith("sqlite:///"):
-        return (Path(uri.removeprefix("sqlite:///")).parent / "mlartifacts").as_uri()
+        return (Path(uri.removeprefix("sqlite:///")).parent / ARTEFACT_FOLDER).as_uri()
     return None
+
+
+def follow_moved_store(uri: str) -> str | None:
+    """Re-anchors an embedded store that was moved or copied (with its `mlartifacts`
+    folder) to the artefacts beside it; returns the folder it recorded before, or None
+    when nothing had moved.
+
+    MLflow records absolute artefact locations, so a moved store would look for its
+    artefacts where it was, and a copy would write into the original's files. linkevo's
+    own stores keep their artefacts in the `mlartifacts` folder beside the database: a
+    recorded location of that form in another folder is rewritten, under the store's
+    lock, to the one beside the database now.
+
+    Raises:
+        TrackingUriError: the database was copied or moved without its artefacts (the
+            folder it recorded still exists and none lies beside it): naming both
+            folders and what to do.
+    """
+    import sqlite3
+    from urllib.parse import unquote, urlparse
+
+    if not uri.startswith("sqlite:///"):
+        return None
+    database = Path(uri.removeprefix("sqlite:///"))
+    here = artifact_root_for(uri)
+    try:
+        with contextlib.closing(sqlite3.connect(f"file:{database}?mode=ro", uri=True)) as db:
+            recorded = {row[0] for row in db.execute("select artifact_location from experiments")}
+    except sqlite3.Error:
+        return None  # a fresh or foreign file: `check_store_file` and MLflow speak for it
+    ours = {loc for loc in recorded if loc.startswith("file://")}
+    moved = sorted(loc for loc in ours if loc.endswith(f"/{ARTEFACT_FOLDER}") and loc != here)
+    if not moved:
+        return None
+    old = moved[0]
+    old_folder = Path(unquote(urlparse(old).path))
+    if old_folder.is_dir() and not (database.parent / ARTEFACT_FOLDER).is_dir():
+        raise TrackingUriError(
+            f"the store {database} records its artefacts in {old_folder}, not beside it: it "
+            f"was copied or moved without them. Copy {old_folder} to "
+            f"{database.parent / ARTEFACT_FOLDER} (or move the store back), so that this "
+            "store never writes into the other's files"
+        )
+    with store_lock(uri), contextlib.closing(sqlite3.connect(database)) as db, db:
+        for table, column in _LOCATIONS:
+            db.execute(
+                f"update {table} set {column} = ? || substr({column}, ?) "
+                f"where {column} = ? or substr({column}, 1, ?) = ?",
+                (here, len(old) + 1, old, len(old) + 1, f"{old}/"),
+            )
+    return old
 
 
 @contextlib.contextmanager
@@ -199,6 +261,7 @@ def ensure_experiment(uri: str, name: str = DEFAULT_EXPERIMENT) -> str:
     from mlflow.tracking import MlflowClient
 
     check_store_file(uri)
+    follow_moved_store(uri)
     with store_lock(uri):
         client = MlflowClient(tracking_uri=uri)
         experiment = client.get_experiment_by_name(name)
