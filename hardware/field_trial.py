@@ -89,6 +89,8 @@ def log_field_trial(
         layout.KIND: layout.FIELD_TRIAL,
         "source_run_id": source.run_id,
         "source_cell": "best" if source.cell is None else str(source.cell),
+        SOURCE_GRID: source.grid_id,
+        LINKAGE: linkage_key(source.document),
         layout.APPROACH: source.approach,
         layout.FITNESS: source.fitness,
         "robot": robot,
@@ -118,39 +120,63 @@ def log_field_trial(
 
 
 @dataclass(frozen=True)
-class TrialTable:
-    """Mean distance per (approach, robot, floor) over every logged repeat.
+class TableRow:
+    """One row of Table I: an approach's robots from one grid (a field trial walks a
+    linkage; the first and the modified robot are two linkages, and a row never pools
+    trials of different linkages).
 
     Attributes:
-        approaches: row order.
+        approach: the source trial's approach.
+        grid: the source trial's grid id ("" for a linkage document without one).
+        linkages: robot -> the linkage walked ("RUN_ID:CELL", or "document ab12..." for a
+            document with no run), for the robots this row has trials of.
+    """
+
+    approach: str
+    grid: str
+    linkages: dict[str, str]
+
+    @property
+    def label(self) -> str:
+        return f"{self.approach} (grid {self.grid})" if self.grid else self.approach
+
+
+@dataclass(frozen=True)
+class TrialTable:
+    """Mean distance per row (an approach's linkages from one grid), robot and floor over
+    every logged repeat.
+
+    Attributes:
+        rows: in the study's order of approaches, then by grid and first appearance.
         floors: column order within each robot (first seen first).
-        means: (approach, robot, floor) -> mean distance in cm of the shown trials.
-        counts: (approach, robot, floor) -> number of repeats.
-        predicted: (approach, robot, floor) -> mean distance in cm predicted by the 3-D
+        means: (row index, robot, floor) -> mean distance in cm of the shown trials.
+        counts: (row index, robot, floor) -> number of repeats.
+        predicted: (row index, robot, floor) -> mean distance in cm predicted by the 3-D
             simulation, or "breaks" (shown beside the real trials).
         simulated: True when the table holds the emulator's dry runs instead of the real
             trials.
         left_out: field-trial runs not shown (the emulator's, or the real ones).
     """
 
-    approaches: tuple[str, ...]
+    rows: tuple[TableRow, ...]
     floors: tuple[str, ...]
-    means: dict[tuple[str, str, str], float]
-    counts: dict[tuple[str, str, str], int]
-    predicted: dict[tuple[str, str, str], float | str] = field(default_factory=dict)
+    means: dict[tuple[int, str, str], float]
+    counts: dict[tuple[int, str, str], int]
+    predicted: dict[tuple[int, str, str], float | str] = field(default_factory=dict)
     simulated: bool = False
     left_out: int = 0
 
     def format(self) -> str:
-        """Returns the table as aligned text in the study's Table I layout; beside the real
-        trials, each cell shows "real / predicted" where a prediction exists."""
+        """Returns the table as aligned text in the study's Table I layout (beside the
+        real trials, each cell shows "real / predicted" where a prediction exists; "–" is
+        a robot and floor with no trial), then the linkage each row's robots walked."""
         head = ["Approach"] + [f"{r.capitalize()} robot: {f}" for r in ROBOTS for f in self.floors]
-        rows = [head]
-        for approach in self.approaches:
-            cells = [approach]
+        lines_ = [head]
+        for i, row in enumerate(self.rows):
+            cells = [row.label]
             for robot in ROBOTS:
                 for floor in self.floors:
-                    key = (approach, robot, floor)
+                    key = (i, robot, floor)
                     mean = self.means.get(key)
                     text = "–" if mean is None else f"{mean:.1f} cm"
                     if self.predicted:
@@ -158,26 +184,41 @@ class TrialTable:
                         guess = "–" if guess is None else guess
                         text += f" / {guess}" if isinstance(guess, str) else f" / {guess:.1f} cm"
                     cells.append(text)
-            rows.append(cells)
-        widths = [max(len(r[i]) for r in rows) for i in range(len(head))]
-        lines = [" | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in rows]
-        lines.insert(1, "-+-".join("-" * w for w in widths))
-        return "\n".join(lines)
+            lines_.append(cells)
+        widths = [max(len(r[i]) for r in lines_) for i in range(len(head))]
+        text = [" | ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)) for r in lines_]
+        text.insert(1, "-+-".join("-" * w for w in widths))
+        text.append("– : no field trial of that robot on that floor. Linkages walked:")
+        for row in self.rows:
+            walked = ", ".join(f"{robot} robot {what}" for robot, what in row.linkages.items())
+            text.append(f"  {row.label}: {walked}")
+        return "\n".join(text)
+
+
+def linkage_key(document: dict) -> str:
+    """Returns a short digest of the linkage a document describes (its genome and mode):
+    two field trials walked the same linkage when their keys agree."""
+    import hashlib
+    import json
+
+    payload = json.dumps([document.get("mode", "paper"), document.get("genome")])
+    return hashlib.sha1(payload.encode()).hexdigest()[:12]
 
 
 def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialTable:
     """Returns the Table I summary of the experiment's real field trials beside the 3-D
-    simulation's predictions for the same approach, robot and floor, or with `simulated`
-    the emulator's dry runs alone."""
-
+    simulation's predictions for the same linkage, robot and floor, or with `simulated`
+    the emulator's dry runs alone. Trials are grouped by the linkage they walked and its
+    grid, never pooled across linkages."""
     store = RunStore(uri, experiment)
     client = store.client
     runs = store.search(layout.where(layout.FIELD_TRIAL), order_by=["attributes.start_time ASC"])
     shown_kind = EMULATOR if simulated else REAL
-    distances: dict[tuple[str, str, str], list[float]] = {}
-    predicted: dict[tuple[str, str, str], list[float]] = {}
-    broken: set[tuple[str, str, str]] = set()
+    distances: dict[tuple[int, str, str], list[float]] = {}
+    predicted: dict[tuple[int, str, str], list[float]] = {}
+    broken: set[tuple[int, str, str]] = set()
     floors: list[str] = []
+    rows: list[TableRow] = []
     left_out = 0
     for run in runs:
         kind = run.data.params.get("simulated", REAL)
@@ -185,10 +226,12 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
             left_out += 1
             continue
         tags = run.data.tags
-        floor = tags.get("floor", "?")
+        floor, robot = tags.get("floor", "?"), tags.get("robot", "first")
         if floor not in floors:
             floors.append(floor)
-        key = (tags.get("approach", "unknown"), tags.get("robot", "first"), floor)
+        i = _row(rows, tags.get(layout.APPROACH, "unknown"), tags.get(SOURCE_GRID, ""), robot,
+                 _walked(tags))  # fmt: skip
+        key = (i, robot, floor)
         history = [m.value for m in client.get_metric_history(run.info.run_id, "distance_cm")]
         if kind == PHYSICS:
             predicted.setdefault(key, []).extend(history)
@@ -196,20 +239,58 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
                 broken.add(key)
         else:
             distances.setdefault(key, []).extend(history)
-    present = {key[0] for key in [*distances, *predicted]}
-    approaches = tuple(a for a in MAP_ELITES if a in present) + tuple(
-        sorted(present - set(MAP_ELITES))
+    order = sorted(
+        range(len(rows)),
+        key=lambda i: (_approach_rank(rows[i].approach), rows[i].approach, rows[i].grid, i),
     )
-    guesses: dict[tuple[str, str, str], float | str] = {
-        k: statistics.fmean(v) for k, v in predicted.items() if v
+    renumber = {old: new for new, old in enumerate(order)}
+
+    def moved(table: dict) -> dict:
+        return {(renumber[i], robot, floor): v for (i, robot, floor), v in table.items()}
+
+    guesses: dict[tuple[int, str, str], float | str] = {
+        k: statistics.fmean(v) for k, v in moved(predicted).items() if v
     }
-    guesses |= dict.fromkeys(broken, "breaks")
+    guesses |= dict.fromkeys(moved(dict.fromkeys(broken)), "breaks")
     return TrialTable(
-        approaches=approaches,
+        rows=tuple(rows[i] for i in order),
         floors=tuple(floors),
-        means={k: statistics.fmean(v) for k, v in distances.items() if v},
-        counts={k: len(v) for k, v in distances.items()},
+        means={k: statistics.fmean(v) for k, v in moved(distances).items() if v},
+        counts={k: len(v) for k, v in moved(distances).items()},
         predicted=guesses,
         simulated=simulated,
         left_out=left_out,
     )
+
+
+SOURCE_GRID = "source_grid_id"
+"""A field trial's tag: the grid of the trial its linkage came from."""
+LINKAGE = "linkage"
+"""A field trial's tag: `linkage_key` of the linkage it walked."""
+
+
+def _walked(tags: dict[str, str]) -> str:
+    """How a table names the linkage a field trial walked: its source run and cell."""
+    run_id, cell = tags.get("source_run_id", ""), tags.get("source_cell", "best")
+    if run_id:
+        return f"run {run_id}" + ("" if cell == "best" else f" cell {cell}")
+    return f"document {tags.get(LINKAGE, '?')}"
+
+
+def _row(rows: list[TableRow], approach: str, grid: str, robot: str, walked: str) -> int:
+    """Returns the index of the row that holds this robot's linkage: the first row of the
+    approach and grid whose robot walked it, or has no such robot yet; else a new row."""
+    for i, row in enumerate(rows):
+        if (row.approach, row.grid) == (approach, grid) and row.linkages.get(robot) in (
+            None,
+            walked,
+        ):
+            row.linkages.setdefault(robot, walked)
+            return i
+    rows.append(TableRow(approach, grid, {robot: walked}))
+    return len(rows) - 1
+
+
+def _approach_rank(approach: str) -> int:
+    """The study's Table I order (the MAP-Elites approaches), others after it."""
+    return MAP_ELITES.index(approach) if approach in MAP_ELITES else len(MAP_ELITES)

@@ -251,6 +251,7 @@ def pull(
         "cell": source.cell,
         "approach": source.approach,
         "fitness": source.fitness,
+        "grid_id": source.grid_id,
     }
     # Written afresh from the genome, so an older document comes out complete (topology,
     # crank angles, physical checks).

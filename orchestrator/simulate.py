@@ -74,6 +74,7 @@ def document_source(path: Path, experiment_id: str) -> SourceLinkage:
         approach=str(meta.get("approach") or "unknown"),
         fitness=str(meta.get("fitness") or "unknown"),
         document=document,
+        grid_id=str(meta.get("grid_id") or ""),
     )
 
 

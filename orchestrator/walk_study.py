@@ -97,6 +97,7 @@ def choose_robots(
                 approach=approach,
                 fitness=FITNESS,
                 document=to_document(np.asarray(row["genome"], dtype=float), mode),
+                grid_id=first.grid_id,
             )
             result, _ = simulate_source(
                 source, "flat", config=config, seconds=seconds, repeats=repeats, model=model
@@ -106,8 +107,8 @@ def choose_robots(
                 (not result["breaks"], -np.inf if distance is None else distance, source, row)
             )
             progress(
-                f"  candidate cell {row['cell']} in region ({row['row']}, {row['col']}): "
-                f"{distance} cm on flat{', breaks' if result['breaks'] else ''}"
+                f"  candidate cell {row['cell']} in region ({row['row']}, {row['col']}) on "
+                f"flat: {walked_text(result)}"
             )
         if scored:
             _, _, source, row = max(scored, key=lambda s: (s[0], s[1]))
@@ -161,8 +162,13 @@ def predict_table_one(
                     "field_trial_run_id": run_id,
                 }
             )
-            progress(
-                f"{robot.approach} {robot.robot} on {floor}: {result['mean_distance_cm']} cm"
-                f"{' (breaks: ' + result['reason'] + ')' if result['breaks'] else ''}"
-            )
+            progress(f"{robot.approach} {robot.robot} on {floor}: {walked_text(result)}")
     return pd.DataFrame(rows)
+
+
+def walked_text(result: dict) -> str:
+    """Returns a simulated trial's outcome in words: its mean distance, or why it has
+    none, and whether it breaks and why."""
+    distance = result["mean_distance_cm"]
+    text = "no distance" if distance is None else f"{distance:.1f} cm"
+    return f"{text} (breaks: {result['reason']})" if result["breaks"] else text

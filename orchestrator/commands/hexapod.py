@@ -312,7 +312,7 @@ def trial_handler(args: argparse.Namespace) -> int:
     config = load_robot(args)
     show_motor_stops()
     uri = resolve_tracking_uri(args.tracking_uri)
-    source = load_source(RunStore.open(uri, args.experiment), LinkageRef.parse(args.linkage))
+    source = load_source(RunStore.open(uri), LinkageRef.parse(args.linkage))
 
     def measure(repeat: int) -> float:
         return distances[repeat - 1] if distances is not None else _ask_distance(repeat)

@@ -34,19 +34,23 @@ def store(store_uri, request):
     return store_uri, MlflowClient(tracking_uri=store_uri), experiment_id
 
 
-def source_run(store, tmp_path, approach, genomes=None):
+def source_run(store, tmp_path, approach, genomes=None, grid="", best=BEST_DOC):
     """Creates a trial run like linkevo's: tags, mode param, best linkage, repertoire."""
     _, client, experiment_id = store
-    run = client.create_run(experiment_id, tags={"approach": approach, "fitness": "Fp"})
+    tags = {"approach": approach, "fitness": "Fp"} | ({"grid_id": grid} if grid else {})
+    run = client.create_run(experiment_id, tags=tags)
     run_id = run.info.run_id
     client.log_param(run_id, "mode", "paper")
-    client.log_dict(run_id, {**BEST_DOC, "approach": approach}, "best_linkage.json")
+    client.log_dict(run_id, {**best, "approach": approach}, "best_linkage.json")
     if genomes is not None:
         table = pa.table(
             {
                 "cell": pa.array(list(genomes), pa.int64()),
                 "genome": pa.array([list(g) for g in genomes.values()], pa.list_(pa.float64())),
                 "loss": pa.array([0.1] * len(genomes), pa.float64()),
+                "error": pa.array([0] * len(genomes), pa.int64()),
+                "desc_0": pa.array([c // 100 / 100 for c in genomes], pa.float64()),
+                "desc_1": pa.array([c % 100 / 100 for c in genomes], pa.float64()),
                 "bin_0": pa.array([c // 100 for c in genomes], pa.int64()),
                 "bin_1": pa.array([c % 100 for c in genomes], pa.int64()),
             }
@@ -112,6 +116,35 @@ def test_field_trials_round_trip_into_table_one(store, tmp_path, config_file, ca
     ]
     assert [c.strip() for c in lines[2].split("|")] == ["MAP-WH", "73.6 cm", "63.6 cm", "–", "–"]
     assert [c.strip() for c in lines[3].split("|")] == ["MAP-ST", "39.4 cm", "–", "77.6 cm", "–"]
+    assert lines[4].startswith("– : no field trial")
+    assert lines[5:] == [
+        f"  MAP-WH: first robot run {wh}",
+        f"  MAP-ST: first robot run {st}, modified robot run {st}",
+    ]
+
+
+def test_the_table_never_pools_trials_of_different_linkages(store, tmp_path, config_file, capsys):
+    uri, client, experiment_id = store
+    cfg = config_file("/dev/unused")
+    legs = [
+        source_run(store, tmp_path, "MAP-LIS", grid="a0", best={**BEST_DOC, "genome": [g] * 56})
+        for g in (0.1, 0.2)
+    ]
+    other_grid = source_run(store, tmp_path, "MAP-LIS", grid="b1")
+    for run_id, distance in zip([*legs, other_grid], (77.6, 168.7, 117.8), strict=True):
+        assert trial(uri, cfg, run_id, "flat", [distance]) == 0
+    capsys.readouterr()
+    experiment = client.get_experiment(experiment_id).name
+    argv = ["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment, "--simulated"]
+    assert main(argv) == 0
+    _, _, _, *lines = capsys.readouterr().out.splitlines()
+    rows = [[c.strip() for c in line.split("|")][:2] for line in lines[:3]]
+    assert rows == [
+        ["MAP-LIS (grid a0)", "77.6 cm"],
+        ["MAP-LIS (grid a0)", "168.7 cm"],
+        ["MAP-LIS (grid b1)", "117.8 cm"],
+    ]
+    assert f"  MAP-LIS (grid a0): first robot run {legs[1]}" in lines
 
 
 def test_cell_reference_builds_the_document_from_the_repertoire_genome(

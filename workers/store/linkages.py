@@ -61,6 +61,7 @@ class SourceLinkage:
     approach: str
     fitness: str
     document: dict
+    grid_id: str = ""
 
 
 def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
@@ -95,6 +96,7 @@ def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
         approach=tags.get(layout.APPROACH, "unknown"),
         fitness=tags.get(layout.FITNESS, "unknown"),
         document=document,
+        grid_id=tags.get(layout.GRID_ID, ""),
     )
 
 
