@@ -16,6 +16,7 @@ COMMAND_MODULES = (
     "linkevo.orchestrator.commands.sim",
     "linkevo.orchestrator.commands.trial",
     "linkevo.orchestrator.commands.grid",
+    "linkevo.orchestrator.commands.ui",
     "linkevo.orchestrator.commands.report",
     "linkevo.orchestrator.commands.pull",
     "linkevo.orchestrator.commands.explore",

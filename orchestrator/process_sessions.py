@@ -89,8 +89,8 @@ def alive_sessions(sids: list[int]) -> list[int]:
     return [pid for sid in sids for pid in session_members(sid)]
 
 
-def processes_using(*paths: str) -> list[int]:
-    """Pids whose command line names one of `paths` (PostgreSQL's own sessions)."""
+def command_lines() -> list[tuple[int, list[str]]]:
+    """Returns (pid, command-line words) of every other process of this machine."""
     found = []
     for entry in Path("/proc").iterdir():
         if entry.name.isdigit() and int(entry.name) != os.getpid():
@@ -98,9 +98,13 @@ def processes_using(*paths: str) -> list[int]:
                 args = (entry / "cmdline").read_bytes().decode(errors="replace")
             except OSError:
                 continue
-            if any(p in args for p in paths):
-                found.append(int(entry.name))
+            found.append((int(entry.name), args.split("\0")))
     return found
+
+
+def processes_using(*paths: str) -> list[int]:
+    """Pids whose command line names one of `paths` (PostgreSQL's own sessions)."""
+    return [pid for pid, words in command_lines() if any(p in "\0".join(words) for p in paths)]
 
 
 def free_port(wanted: int, name: str) -> int:

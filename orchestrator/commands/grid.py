@@ -5,11 +5,9 @@ from __future__ import annotations
 import argparse
 import json
 import signal
-import subprocess
 import sys
 from typing import TYPE_CHECKING
 
-from linkevo.orchestrator.cli import CliError
 from linkevo.orchestrator.commands.options import linkevo_command
 
 if TYPE_CHECKING:
@@ -70,18 +68,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     grid.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     grid.set_defaults(func=run_grid)
-
-    ui = subparsers.add_parser(
-        "ui",
-        help="open the MLflow UI on the project's store (loopback only)",
-        description="Serve the MLflow UI for the store on 127.0.0.1.",
-    )
-    ui.add_argument(
-        "--tracking-uri",
-        help="store to browse (default: MLFLOW_TRACKING_URI, else the embedded runs/ store)",
-    )
-    ui.add_argument("--port", type=int, default=5000, help="loopback port of the UI")
-    ui.set_defaults(func=run_ui)
 
 
 def run_grid(args: argparse.Namespace) -> int:
@@ -153,56 +139,6 @@ def _ui_flag(uri: str) -> list[str]:
     from linkevo.workers.store.tracking import default_tracking_uri
 
     return [] if uri == default_tracking_uri() else ["--tracking-uri", uri]
-
-
-def run_ui(args: argparse.Namespace) -> int:
-    """Runs `mlflow ui` on the store, bound to 127.0.0.1, until Ctrl-C or SIGTERM, which
-    stop the server with it; killed outright, it takes the server with it too."""
-    from mlflow.tracking import MlflowClient
-
-    from linkevo.orchestrator.process_sessions import in_use, stop_session, stop_with_parent
-    from linkevo.workers.store.tracking import (
-        DEFAULT_EXPERIMENT,
-        artifact_root_for,
-        ensure_experiment,
-        require_store,
-        resolve_tracking_uri,
-        ui_address,
-    )
-
-    uri = resolve_tracking_uri(args.tracking_uri)
-    if uri.startswith(("http://", "https://")):
-        raise CliError(
-            f"--tracking-uri {uri!r} is already a server: open it in a browser; "
-            "allowed here: a sqlite:/// URI or a store folder"
-        )
-    require_store(uri)
-    if not 0 < args.port < 65536 or in_use(args.port):
-        raise CliError(
-            f"--port {args.port}: not a free loopback port (another program listens there, "
-            "or it is out of range); pass a free one, e.g. --port 5001"
-        )
-    experiment_id = None
-    if MlflowClient(tracking_uri=uri).get_experiment_by_name(DEFAULT_EXPERIMENT) is not None:
-        experiment_id = ensure_experiment(uri)  # brings an older store's view up to date
-    command = [sys.executable, "-m", "mlflow", "ui", "--backend-store-uri", uri]
-    artifacts = artifact_root_for(uri)
-    if artifacts:
-        command += ["--default-artifact-root", artifacts]
-    command += ["--host", "127.0.0.1", "--port", str(args.port)]
-    address = ui_address(f"http://127.0.0.1:{args.port}", experiment_id)
-    print(f"MLflow UI on {address}  (Ctrl-C stops it)", file=sys.stderr)
-    server = subprocess.Popen(command, start_new_session=True, preexec_fn=stop_with_parent)
-
-    def stop(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
-
-    signal.signal(signal.SIGTERM, stop)
-    try:
-        return server.wait()
-    except KeyboardInterrupt:
-        stop_session(server.pid)
-        return 0
 
 
 def describe(grid: Grid, cluster: Cluster) -> str:

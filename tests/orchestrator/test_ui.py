@@ -45,7 +45,8 @@ def _ui(uri: str, port: int) -> Iterator[tuple[subprocess.Popen, str]]:
         start_new_session=True,
     )
     try:
-        address = ui.stderr.readline().split(" on ", 1)[1].split()[0]
+        ui.address_line = ui.stderr.readline()
+        address = ui.address_line.split(" on ", 1)[1].split()[0]
         deadline = time.monotonic() + 120
         while True:
             try:
@@ -71,18 +72,32 @@ def test_ui_serves_the_store_on_loopback(tmp_path):
     uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
     ensure_experiment(uri)
     port = _free_port()
-    with _ui(uri, port) as (ui, _address):
+    with _ui(uri, port) as (ui, address):
+        address_line = ui.address_line
         request = f"http://127.0.0.1:{port}/ajax-api/2.0/mlflow/experiments/search?max_results=10"
         with urllib.request.urlopen(request, timeout=10) as r:
             names = [e["name"] for e in json.loads(r.read())["experiments"]]
         assert "linkevo" in names
+        second = subprocess.run(
+            [sys.executable, "-c", CLI, "ui", "--tracking-uri", uri, "--port", str(_free_port())],
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+        assert second.returncode == 2, second.stderr
+        assert "a UI already serves this store (pid " in second.stderr
+        assert f"): open {address} , or stop it first" in second.stderr
+        other = f"sqlite:///{tmp_path / 'other' / 'mlflow.db'}"
+        ensure_experiment(other)
         busy = subprocess.run(
-            [sys.executable, "-c", CLI, "ui", "--tracking-uri", uri, "--port", str(port)],
+            [sys.executable, "-c", CLI, "ui", "--tracking-uri", other, "--port", str(port)],
             capture_output=True,
             text=True,
             timeout=60,
         )
         assert busy.returncode == 2 and f"--port {port}: not a free loopback port" in busy.stderr
+        log = tmp_path / "store" / "mlflow-ui.log"
+        assert log.is_file() and f"server log: {log}" in address_line
         ui.send_signal(signal.SIGTERM)  # to linkevo ui alone: it stops its server
         assert ui.wait(timeout=60) == 0
         with pytest.raises(OSError):
@@ -134,11 +149,11 @@ def _grid_store(uri: str, n_trials: int) -> list[float]:
     return losses
 
 
-def test_a_fresh_browser_lands_on_the_trials_with_metric_columns(tmp_path):
+def test_a_fresh_browser_lands_on_every_trial_with_metric_columns(tmp_path):
     from selenium.webdriver.common.by import By
 
     uri = f"sqlite:///{tmp_path / 'store' / 'mlflow.db'}"
-    losses = _grid_store(uri, 3)
+    losses = _grid_store(uri, 120)  # more than the 100 runs a page of MLflow's UI holds
     with (
         _ui(uri, _free_port()) as (_ui_process, address),
         chromium(tmp_path / "profile", size="2400,1000") as page,
@@ -157,9 +172,11 @@ def test_a_fresh_browser_lands_on_the_trials_with_metric_columns(tmp_path):
         header_text = " ".join(h.text for h in headers)
         for column in ("best_loss", "coverage", "qd_score", "approach", "fitness"):
             assert column in header_text, header_text
-        for loss, index in zip(losses, range(3), strict=True):  # every trial, not folded
+        for loss, index in zip(losses[:3], range(3), strict=True):  # trials, not folded
             assert f"MAP-LIS/Fp/{index:02d}" in body and f"{loss:g}" in body
         assert "Group: a1b2c3d4e5f6" in body  # trials grouped by grid, the group unfolded
+        assert "120 matching runs" in body  # every trial loaded, no grid run among them
+        assert "Load more" not in body
         assert "Model registry" in body  # the model-training sidebar, not GenAI's
         if os.environ.get("LINKEVO_DOCS_SCREENSHOTS"):
             page.save_screenshot(str(DOCS_IMG / "mlflow_trials.png"))

@@ -32,6 +32,8 @@ RUNS_VIEW_KEY = "linkevo-trials"
 """The name of the runs table's view that `linkevo ui` opens (`RUNS_VIEW`)."""
 RUNS_VIEW = {
     "searchFilter": f"tags.`{layout.KIND}` = '{layout.TRIAL}'",
+    "orderByKey": "tags.`mlflow.runName`",
+    "orderByAsc": True,
     "selectedColumns": [
         *(f"tags.`{tag}`" for tag in (layout.APPROACH, layout.FITNESS, layout.TRIAL_INDEX)),
         *(f"metrics.`{metric}`" for metric in ("best_loss", "coverage", "qd_score")),
