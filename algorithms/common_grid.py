@@ -10,7 +10,7 @@ from linkevo.sim.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_ind
 
 COMMON_SPACE = "MAP-LIS"
 """The shared grid: MAP-LIS's (mean beam length x lift, 100 x 100), whose descriptors
-`sim.evaluate` computes for every genome, whatever the approach."""
+`sim.evaluating` computes for every genome, whatever the approach."""
 
 
 class CommonGrid:

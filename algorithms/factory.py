@@ -7,6 +7,7 @@ from linkevo.algorithms.map_elites import MapElites
 from linkevo.algorithms.nsga2 import NSGA2
 from linkevo.algorithms.optimizer import Optimizer
 from linkevo.algorithms.random_sampling import RandomSampling
+from linkevo.sim.descriptors import COVERAGE_SPACES, check_coverage_space
 from linkevo.sim.study import APPROACHES, DEFAULT_ANGLES, MULTI_OBJECTIVE, evaluated_fitness
 
 _OPTIONS: dict[str, tuple[str, ...]] = {
@@ -20,8 +21,35 @@ _OPTIONS: dict[str, tuple[str, ...]] = {
 
 
 def eval_fitness(approach: str, fitness: str) -> str:
-    """Returns the `sim.evaluate` fitness an approach needs: "Fp2"/"Fsl2" for NSGA2."""
+    """Returns the `sim.evaluating` fitness an approach needs: "Fp2"/"Fsl2" for NSGA2."""
     return evaluated_fitness(fitness, approach in MULTI_OBJECTIVE)
+
+
+def check_options(approach: str, options: dict[str, object]) -> None:
+    """Raises ValueError, naming the option and the allowed ones, for options `approach`
+    would refuse; MAP-AU's are checked without building its autoencoder (no torch, unless
+    they ask for a GPU by name)."""
+    from linkevo.algorithms.mutation import check_initial_sigma
+
+    check_initial_sigma(options.get("initial_sigma"))
+    if approach == "MAP-AU":
+        from linkevo.algorithms.aurora_settings import AuroraSettings
+
+        settings = AuroraSettings.from_options(
+            {k: v for k, v in options.items() if k != "initial_sigma"}
+        )
+        if settings.device == "cuda":
+            settings.resolved_device()
+        return
+    if approach not in _OPTIONS:
+        raise ValueError(f"unknown approach {approach!r}; allowed: {', '.join(APPROACHES)}")
+    unknown = sorted(set(options) - set(_OPTIONS[approach]))
+    if unknown:
+        raise ValueError(
+            f"unknown option(s) {', '.join(map(repr, unknown))} for {approach}; "
+            f"allowed: {', '.join(_OPTIONS[approach])}"
+        )
+    check_coverage_space(options.get("coverage_space", COVERAGE_SPACES[0]))
 
 
 def make_optimizer(
@@ -62,14 +90,7 @@ def make_optimizer(
         from linkevo.algorithms.aurora import AuroraMapElites
 
         return AuroraMapElites(**common, **options)
-    if approach not in _OPTIONS:
-        raise ValueError(f"unknown approach {approach!r}; allowed: {', '.join(APPROACHES)}")
-    unknown = sorted(set(options) - set(_OPTIONS[approach]))
-    if unknown:
-        raise ValueError(
-            f"unknown option(s) {', '.join(map(repr, unknown))} for {approach}; "
-            f"allowed: {', '.join(_OPTIONS[approach])}"
-        )
+    check_options(approach, options)
     if approach == "EA":
         return EvolutionaryAlgorithm(**common, **options)
     if approach == "NSGA2":

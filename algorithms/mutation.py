@@ -15,6 +15,15 @@ SIGMA_NOISE = 0.1
 _BELOW_ONE = np.nextafter(1.0, 0.0)
 
 
+def check_initial_sigma(value: object) -> None:
+    """Raises ValueError unless `value` is None or a number in [0, 1)."""
+    ok = value is None or (
+        isinstance(value, int | float) and not isinstance(value, bool) and 0.0 <= value < 1.0
+    )
+    if not ok:
+        raise ValueError(f"initial_sigma must be in [0, 1) or None, got {value!r}")
+
+
 def n_sigmas(mode: str) -> int:
     """Returns how many mutation strengths a genome carries: 1 (paper) or 2 (legacy)."""
     if mode == "paper":

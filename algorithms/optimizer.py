@@ -9,7 +9,7 @@ import numpy as np
 
 from linkevo.algorithms.common_grid import COMMON_SPACE, CommonGrid
 from linkevo.algorithms.individuals import Individuals
-from linkevo.algorithms.mutation import initial_sigma, mutate, n_sigmas
+from linkevo.algorithms.mutation import check_initial_sigma, initial_sigma, mutate, n_sigmas
 from linkevo.algorithms.rng_state import decode_rng, encode_rng
 from linkevo.algorithms.scoring import QD_OFFSETS, scalar_loss
 from linkevo.sim.evaluation import Evaluation
@@ -24,7 +24,7 @@ class Optimizer(Protocol):
 
     @property
     def eval_fitness(self) -> str:
-        """The `sim.evaluate` fitness name the evaluator must use."""
+        """The `sim.evaluating` fitness name the evaluator must use."""
         ...
 
     @property
@@ -113,8 +113,7 @@ class BaseOptimizer:
         ):
             raise ValueError(f"batch_size must be a positive integer, got {batch_size!r}")
         n_sigmas(mode)
-        if initial_sigma is not None and not 0.0 <= initial_sigma < 1.0:
-            raise ValueError(f"initial_sigma must be in [0, 1) or None, got {initial_sigma!r}")
+        check_initial_sigma(initial_sigma)
         self.fitness = fitness
         self.batch_size = int(batch_size)
         self.mode = mode
@@ -131,7 +130,7 @@ class BaseOptimizer:
 
     @property
     def eval_fitness(self) -> str:
-        """The `sim.evaluate` fitness name: the two-objective variant for NSGA-II."""
+        """The `sim.evaluating` fitness name: the two-objective variant for NSGA-II."""
         return evaluated_fitness(self.fitness, self.multi_objective)
 
     @property

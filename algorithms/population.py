@@ -8,7 +8,12 @@ from linkevo.algorithms import scoring
 from linkevo.algorithms.archive import elite_rows
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.optimizer import BaseOptimizer
-from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES, bin_descriptors, cell_index
+from linkevo.sim.descriptors import (
+    DESCRIPTOR_SPACES,
+    bin_descriptors,
+    cell_index,
+    check_coverage_space,
+)
 from linkevo.sim.evaluation import Evaluation
 
 
@@ -28,10 +33,7 @@ class PopulationOptimizer(BaseOptimizer):
 
     def __init__(self, *, coverage_space: str = "MAP-LIS", **kwargs: object) -> None:
         super().__init__(**kwargs)  # type: ignore[arg-type]
-        if coverage_space not in COVERAGE_SPACES:
-            raise ValueError(
-                f"unknown coverage_space {coverage_space!r}; allowed: {', '.join(COVERAGE_SPACES)}"
-            )
+        check_coverage_space(coverage_space)
         self.coverage_space = coverage_space
         self._population: Individuals | None = None
 

@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from linkevo.orchestrator.local_cluster import ClusterSettings, down, up
 from linkevo.sim.study import STUDY_EVALUATIONS
-from linkevo.workers.trial import TrialSpec
+from linkevo.workers.trial_spec import TrialSpec
 
 SETUPS: dict[str, tuple[int, str]] = {
     "own task, 1 thread": (1, ""),

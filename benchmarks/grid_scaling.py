@@ -42,7 +42,8 @@ from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment
-from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec
 
 BATCH = 5000
 REPEATS = 40

@@ -31,7 +31,7 @@ import time
 import numba
 import numpy as np
 
-from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluating import evaluate
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import random_genomes
 from linkevo.sim.reference import evaluate_reference

@@ -35,7 +35,8 @@ from linkevo.sim.reference import evaluate_reference
 from linkevo.sim.study import STUDY_EVALUATIONS
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
-from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec
 
 BATCH = 5000
 SMALL_BATCH = 1000

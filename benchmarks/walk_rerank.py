@@ -22,7 +22,8 @@ from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.walk_map import CellBatch, walk_cells
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
-from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec
 
 EVALUATIONS = 725_000
 

@@ -5,9 +5,9 @@ Run: `.venv/bin/python benchmarks/walk_speed.py` (options: --linkage FILE.json, 
 default `benchmarks/walk_linkage.json`, the first robot of MAP-LIS in the paper-mode study
 grid (`linkevo hexapod study`). The process is pinned to one core.
 
-Per floor and robot model (`sim.walk.MODELS`: `lean`, the default, and `full`), each the
+Per floor and robot model (`sim.walking.MODELS`: `lean`, the default, and `full`), each the
 best of `--repeats` runs, simulated seconds per wall second:
-- **walk**: `sim.walk.walk` as `linkevo hexapod simulate` runs it: model built, settled,
+- **walk**: `sim.walking.walk` as `linkevo hexapod simulate` runs it: model built, settled,
   then the gait's controller, the motors and the records a builder reads (pin statics
   included);
 - **ceiling**: the same model stepped for the same time in control ticks with constant
@@ -33,7 +33,7 @@ import numpy as np
 from linkevo.sim.leg import leg_from_genome
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.robot import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG
-from linkevo.sim.walk import MODELS, WalkSettings, walk
+from linkevo.sim.walking import MODELS, WalkSettings, walk
 
 DEFAULT_LINKAGE = Path(__file__).with_name("walk_linkage.json")
 

@@ -4,7 +4,7 @@ Run: `.venv/bin/python benchmarks/walkmap_fidelity.py --run-id RUN_ID [--trackin
 [--cells 24]`: RUN_ID is a repertoire trial (the benchmark's: MAP-LIS's first robot's trial
 of the paper-mode study grid, `docs/results.md`). The same `--cells` buildable cells (every
 k-th by loss) are walked on each floor, on one core, three ways: the Table I protocol
-(`sim.walk.field_trials`: five 10-s walks from hand-placed starts at the lean model's 2-ms
+(`sim.walking.field_trials`: five 10-s walks from hand-placed starts at the lean model's 2-ms
 step, their mean), one Table I walk from the unperturbed start, and the walk-map walk
 (`sim.walk_map.walk_map_settings`: one walk at 4 ms with the sparse Jacobian). Per floor and
 way it prints the time per cell and its ratio to the protocol's, and the agreement with the
@@ -27,8 +27,8 @@ from scipy.stats import spearmanr
 from linkevo.orchestrator.walkmap import Selection
 from linkevo.sim.leg import leg_from_genome
 from linkevo.sim.robot import FLOORS
-from linkevo.sim.walk import WalkSettings, field_trials, walk
 from linkevo.sim.walk_map import WALK_SECONDS, walk_map_settings
+from linkevo.sim.walking import WalkSettings, field_trials, walk
 from linkevo.workers.store.runs import RunStore
 
 WAYS = ("Table I protocol (5 walks)", "one Table I walk", "walk-map walk")

@@ -7,14 +7,10 @@ The phases live beside it: `ray_connection` (a local instance or a cluster), `gr
 
 from __future__ import annotations
 
-import json
 import shutil
 import sys
 import time
-import urllib.error
-import urllib.request
 from dataclasses import dataclass
-from pathlib import Path
 from typing import TextIO
 
 from linkevo.orchestrator.config import ConfigError
@@ -26,6 +22,13 @@ from linkevo.orchestrator.fan_out import (
 )
 from linkevo.orchestrator.grid import Grid, grid_record, trial_dir, work_root
 from linkevo.orchestrator.grid_run import log_grid_summary, parent_run
+from linkevo.orchestrator.launch_checks import (
+    check_no_shrink,
+    check_restart,
+    check_store,
+    check_store_holds_grid,
+    trial_specs,
+)
 from linkevo.orchestrator.lease import Lease, Subject
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.ray_connection import connect_ray, uses_local_ray, warm_kernels
@@ -40,8 +43,7 @@ from linkevo.workers.store.outage import (
     use_quick_http,
 )
 from linkevo.workers.store.runs import RunStore
-from linkevo.workers.store.tracking import check_store_file, ensure_experiment, resolve_tracking_uri
-from linkevo.workers.trial import TrialSpec
+from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
 
 
@@ -71,112 +73,6 @@ class GridResult:
     def failed(self) -> tuple[TrialOutcome, ...]:
         """The trials that did not finish."""
         return tuple(o for o in self.outcomes if o.status != "FINISHED")
-
-
-def check_tracking_uri(uri: str, timeout: float = 5.0) -> None:
-    """Raises ConfigError when an HTTP tracking server does not answer its health check."""
-    if not uri.startswith(("http://", "https://")):
-        return
-    url = uri.rstrip("/") + "/health"
-    try:
-        with urllib.request.urlopen(url, timeout=timeout) as response:
-            if response.status == 200:
-                return
-            problem = f"HTTP {response.status}"
-    except (urllib.error.URLError, OSError) as exc:
-        problem = str(getattr(exc, "reason", exc))
-    raise ConfigError(
-        f"tracking URI {uri!r} is unreachable ({url}: {problem}); start the server, or "
-        "allowed: an http(s):// MLflow server that answers /health, a sqlite:/// URI, "
-        "or a folder for an embedded store"
-    )
-
-
-def check_store(uri: str) -> None:
-    """Refuses a store the grid cannot write, before anything is written: a tracking
-    server that does not answer, an embedded store file that is damaged."""
-    check_tracking_uri(uri)
-    check_store_file(uri)
-
-
-def check_store_holds_grid(record: Path, uri: str, grid: Grid) -> None:
-    """Refuses `--resume` on a store that holds no run of the grid when the grid's own
-    record (`grid.grid_record`) says it ran: the store was emptied or replaced, and a
-    resume would run every trial again beside the old files.
-
-    Raises:
-        ConfigError: naming both stores, the record and the choices.
-    """
-    try:
-        ran = json.loads(record.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return  # never launched here (or an unreadable record): nothing to protect
-    raise ConfigError(
-        f"--resume: the store {uri} holds no run of grid {grid.grid_id}, but {record} says "
-        f"it ran in {ran.get('tracking_uri')!r} as parent run {ran.get('parent_run_id')!r}: "
-        "the store was emptied or replaced. Resume against the store it ran in "
-        f"(--tracking-uri), or move {record.parent} away and launch the grid afresh "
-        "(same config, no --resume): its seeds make it the same grid"
-    )
-
-
-def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
-    """Returns every trial's spec by key, checking each approach's options by building
-    its optimizer once; raises ConfigError before any trial starts."""
-    from linkevo.workers.trial import build_optimizer
-
-    cfg = grid.config
-    specs: dict[str, TrialSpec] = {}
-    for cell in grid.cells:
-        try:
-            spec = TrialSpec(
-                approach=cell.approach,
-                fitness=cell.fitness,
-                evaluations=cfg.evaluations,
-                batch_size=cfg.batch_size,
-                mode=cfg.mode,
-                seed=cell.seed,
-                target=cfg.target,
-                n_angles=cfg.n_angles,
-                checkpoint_every=cfg.checkpoint_every,
-                max_seconds=cfg.max_seconds,
-                walk_rerank=cfg.walk_rerank,
-                options=dict(cfg.options.get(cell.approach, {})),
-            )
-            if cell.index == 0:
-                build_optimizer(spec)
-        except ValueError as exc:
-            raise ConfigError(f"trial {cell.key}: {exc}") from exc
-        specs[cell.key] = spec
-    return specs
-
-
-def check_no_shrink(grid: Grid, earlier: list) -> None:
-    """Raises ConfigError when the store holds trials of the grid beyond its `trials`
-    (a grid's trial count may grow on `--resume`, never shrink: the report would hide the
-    trials left out)."""
-    indices = [int(r.data.tags.get(layout.TRIAL_INDEX, -1)) for r in earlier]
-    held = max(indices, default=-1) + 1
-    if held > grid.config.trials:
-        raise ConfigError(
-            f"config key 'trials' = {grid.config.trials} is invalid for grid {grid.grid_id}: "
-            f"its store already holds trials up to index {held - 1}; allowed: >= {held}"
-        )
-
-
-def check_restart(grid: Grid, restart: tuple[str, ...], resume: bool) -> None:
-    """Raises ConfigError for a `--restart-trial` key the grid lacks, or without resume."""
-    if not restart:
-        return
-    if not resume:
-        raise ConfigError("--restart-trial needs --resume: it restarts a trial of a grid")
-    keys = {cell.key for cell in grid.cells}
-    for key in restart:
-        if key not in keys:
-            raise ConfigError(
-                f"--restart-trial {key!r}: not a trial of grid {grid.grid_id}; allowed: a "
-                f"trial key APPROACH/FITNESS/INDEX such as {grid.cells[0].key}"
-            )
 
 
 def launch(

@@ -33,7 +33,7 @@ import pandas as pd
 
 from linkevo.orchestrator.pull import own_modules
 from linkevo.sim import decode, simulate
-from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS
+from linkevo.sim.decoding import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from linkevo.sim.study import FITNESSES, ordered

@@ -19,7 +19,7 @@ from linkevo.orchestrator.reservation import Reservation
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.outage import ServerLost, ServerWatch, patiently
 from linkevo.workers.store.runs import RunStore
-from linkevo.workers.trial import TrialSpec
+from linkevo.workers.trial_spec import TrialSpec
 from linkevo.workers.trial_task import TrialJob, TrialOutcome, end_run
 
 

@@ -1,5 +1,5 @@
 """Provides simulated field trials: a tracked or pulled linkage walked on the 3-D robot
-(`sim.walk`) with the real robot's gait from its config, summarised as Table I reads it,
+(`sim.walking`) with the real robot's gait from its config, summarised as Table I reads it,
 and logged as a field trial marked `simulated=physics`."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from linkevo.hardware.field_trial import PHYSICS, log_field_trial
 from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.linkage_doc import DocumentError, from_document
 from linkevo.sim.robot import LEG_SLOTS, floor
-from linkevo.sim.walk import Walk, WalkSettings, field_trials, summary
+from linkevo.sim.walking import Walk, WalkSettings, field_trials, summary
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.linkages import SourceLinkage
 
@@ -89,7 +89,7 @@ def simulate_source(
     model: str = "lean",
 ) -> tuple[dict, list[Walk]]:
     """Walks the source's linkage `repeats` times on the floor and returns the summary
-    (`sim.walk.summary`, with how the leg was built and the robot model, `sim.walk.MODELS`)
+    (`sim.walking.summary`, with how the leg was built and the robot model, `sim.walking.MODELS`)
     and the walks; a linkage that does not turn comes back as `breaks` with no distances
     and no walks."""
     genome, mode = from_document(source.document)

@@ -47,8 +47,14 @@ DESCRIPTOR_SPACES: dict[str, DescriptorSpace] = {
 }
 """Every MAP-Elites approach's space; MAP-AU's values come from the AURORA encoder."""
 COVERAGE_SPACES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST")
-"""The published grids whose descriptors `sim.evaluate` computes: the ones on which an
+"""The published grids whose descriptors `sim.evaluating` computes: the ones on which an
 approach without its own grid (EA, NSGA-II, RANDOM) is measured."""
+
+
+def check_coverage_space(name: object) -> None:
+    """Raises ValueError unless `name` is one of `COVERAGE_SPACES`."""
+    if name not in COVERAGE_SPACES:
+        raise ValueError(f"unknown coverage_space {name!r}; allowed: {', '.join(COVERAGE_SPACES)}")
 
 
 def bin_descriptors(values: np.ndarray, space: DescriptorSpace) -> np.ndarray:

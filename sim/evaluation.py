@@ -10,7 +10,7 @@ import numpy as np
 from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
 
 DESCRIPTOR_WIDTHS: dict[str, int] = {name: DESCRIPTOR_SPACES[name].dims for name in COVERAGE_SPACES}
-"""Columns of each descriptor array `sim.evaluate` computes, by approach."""
+"""Columns of each descriptor array `sim.evaluating` computes, by approach."""
 ALIGNMENT = 64
 """Byte alignment of each array laid out in a shared buffer (a cache line)."""
 
@@ -52,7 +52,7 @@ def _aligned(nbytes: int) -> int:
 
 @dataclass(frozen=True)
 class Evaluation:
-    """What `sim.evaluate` gives back for N genomes simulated over A crank angles.
+    """What `sim.evaluating` gives back for N genomes simulated over A crank angles.
 
     Attributes:
         loss: (N,) for Fp/Fsl, (N, 2) for Fp2/Fsl2; losses to minimise, always finite.

@@ -1,5 +1,5 @@
 """Provides the tripod gait: its settings and the phase PID, one definition for the real
-robot (`hardware/`) and the simulated one (`sim.walk`).
+robot (`hardware/`) and the simulated one (`sim.walking`).
 
 A leg's phase is its crank angle in the linkage's own frame (the spec's counter-clockwise
 crank angle), whatever way its motor is mounted. Leg i's target is

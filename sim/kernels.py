@@ -84,7 +84,7 @@ _JIT = {**_BATCH, "_nrt": False, "forceinline": True, **NOALIAS}
 reference counting, which otherwise costs two calls per array argument per call. LLVM
 inlines them into the batch loops, and their array arguments are `noalias`: no two of them
 may overlap in memory while the helper runs (every caller passes distinct scratch and
-output arrays; `sim.evaluate` refuses overlapping outputs). Knowing that, LLVM vectorises
+output arrays; `sim.evaluating` refuses overlapping outputs). Knowing that, LLVM vectorises
 their loops without run-time overlap checks, and inlined they pay no argument passing:
 together a quarter of the evaluation's time (docs/simulator.md, "Kernel design")."""
 _INLINE = {**_JIT, "inline": "always"}

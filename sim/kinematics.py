@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim import kernels
-from linkevo.sim.decode import LinkageBatch
+from linkevo.sim.decoding import LinkageBatch
 from linkevo.sim.genome import MAX_BEAMS, N_NODES
 from linkevo.sim.study import DEFAULT_ANGLES, MIN_ANGLES
 

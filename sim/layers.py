@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 
-from linkevo.sim.decode import LinkageBatch
+from linkevo.sim.decoding import LinkageBatch
 from linkevo.sim.kinematics import Motion
 
 COLLINEAR = 1e-9

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linkevo.sim.decode import NODE_KINDS, LinkageBatch, decode
+from linkevo.sim.decoding import NODE_KINDS, LinkageBatch, decode
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.layers import layer_plan

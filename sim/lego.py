@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim import reference
-from linkevo.sim.decode import NODE_KINDS, LinkageBatch, decode
+from linkevo.sim.decoding import NODE_KINDS, LinkageBatch, decode
 from linkevo.sim.fitness import named_target
 from linkevo.sim.kinematics import Motion, simulate
 from linkevo.sim.physical import PhysicalChecks, max_stretch, physical_checks

@@ -9,7 +9,7 @@ import re
 import numpy as np
 
 from linkevo.sim import kernels
-from linkevo.sim.decode import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
+from linkevo.sim.decoding import BEAM_KINDS, NODE_KINDS, LinkageBatch, check_mode, decode
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.genome import MAX_BEAMS, N_GENES, N_NODES, validate_genomes
 from linkevo.sim.kinematics import Motion, check_angles, simulate

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from linkevo.sim.decode import NODE_KINDS, LinkageBatch
+from linkevo.sim.decoding import NODE_KINDS, LinkageBatch
 from linkevo.sim.kinematics import Motion
 
 TOGGLE_DEG = 5.0

@@ -2,7 +2,7 @@
 
 It follows `linkage-spec.md` sections 1 to 5 and `docs/simulator.md` one linkage at a time,
 written for clarity rather than speed: small dataclasses, the `math` module, no batching.
-The tests hold the batched kernel (`sim.evaluate`) equal to it to 1e-9.
+The tests hold the batched kernel (`sim.evaluating`) equal to it to 1e-9.
 """
 
 from __future__ import annotations
@@ -507,7 +507,7 @@ def evaluate_reference(
     target: Target | None = None,
     n_angles: int = 40,
 ) -> Evaluation:
-    """Returns the Evaluation of genomes (N, 56), one linkage at a time (as `sim.evaluate`)."""
+    """Returns the Evaluation of genomes (N, 56), one linkage at a time (as `sim.evaluating`)."""
     if fitness not in FITNESSES:
         raise ValueError(f"fitness must be one of {FITNESSES}, got {fitness!r}")
     check_mode(mode)

@@ -46,7 +46,7 @@ class Motor:
 
     Unclipped, that loop is a velocity servo, torque `servo_gain * (w_goal - w)`; the clip
     bounds its torque by the torque-speed line (`torque_limits`). The walk simulates it so
-    (`sim.walk`): MuJoCo integrates the servo implicitly and the limits follow the speed
+    (`sim.walking`): MuJoCo integrates the servo implicitly and the limits follow the speed
     at every control tick."""
 
     stall_nm: float = 2.5

@@ -81,7 +81,7 @@ FITNESS: dict[str, Fitness] = {f.name: f for f in FITNESS_TABLE}
 SINGLE_FITNESSES: tuple[str, ...] = tuple(FITNESS)
 """The fitness functions a trial optimises ("Fp", "Fsl")."""
 FITNESSES: tuple[str, ...] = (*SINGLE_FITNESSES, *(f.two_objective for f in FITNESS_TABLE))
-"""Every fitness `sim.evaluate` computes: the two and their two-objective variants."""
+"""Every fitness `sim.evaluating` computes: the two and their two-objective variants."""
 MODES: tuple[str, ...] = ("paper", "legacy")
 """The simulation's modes (spec: paper by default, legacy as the published code)."""
 TARGETS: tuple[str, ...] = ("D16", "D24")
@@ -115,7 +115,7 @@ def is_pareto(approach: str) -> bool:
 
 
 def evaluated_fitness(fitness: str, multi_objective: bool) -> str:
-    """Returns the `sim.evaluate` fitness behind `fitness`: its two-objective variant for a
+    """Returns the `sim.evaluating` fitness behind `fitness`: its two-objective variant for a
     multi-objective approach, else itself."""
     return FITNESS[fitness].two_objective if multi_objective else fitness
 

@@ -2,7 +2,7 @@
 that says why it is not walked) and `walk_legs` (each distinct leg walked once per floor),
 and `walk_cells`, the two in one process.
 
-A walk-map walk is the Table I protocol's walk (`sim.walk.walk` on the lean model) once,
+A walk-map walk is the Table I protocol's walk (`sim.walking.walk` on the lean model) once,
 from the unperturbed start, instead of five times from hand-placed starts, at twice the
 physics step and with the sparse constraint Jacobian (the same walk to rounding). Repeats
 of one linkage agree within a centimetre or two except where a robot breaks, and the
@@ -24,7 +24,7 @@ import numpy as np
 
 from linkevo.sim.leg import LegError, LegRecipe, leg_recipe
 from linkevo.sim.robot import FLOORS, WALK_SECONDS
-from linkevo.sim.walk import WalkSettings, walk
+from linkevo.sim.walking import WalkSettings, walk
 
 WALK_MAP_STEP_S = 0.004
 """A walk-map walk's physics step, twice Table I's: it ranks cells as Table I's walks do

@@ -2,18 +2,17 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
-from pathlib import Path
 from typing import Protocol
 
 import numpy as np
 
-from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluating import evaluate
 from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.fitness import N_OBJECTIVES, Target, named_target
-from linkevo.sim.study import DEFAULT_ANGLES, TARGETS
+from linkevo.sim.fitness import N_OBJECTIVES
+from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.result_pool import ResultPool
+from linkevo.workers.trial_spec import resolve_target
 
 Pending = Callable[[], Evaluation]
 """A submitted batch: calling it waits for and returns its Evaluation."""
@@ -32,36 +31,14 @@ class Evaluator(Protocol):
         ...
 
 
-def resolve_target(target: str) -> Target:
-    """Returns the F_p target named `target` ("D16", "D24") or stored in a JSON file.
-
-    Raises:
-        ValueError: naming the value when it is neither a published name nor a readable
-            JSON target file.
-    """
-    if target in TARGETS:
-        return named_target(target)
-    path = Path(target)
-    if not path.is_file():
-        raise ValueError(
-            f"target {target!r} is neither a published target ({', '.join(TARGETS)}) "
-            "nor an existing JSON file"
-        )
-    try:
-        doc = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"target file {target!r} is not readable JSON: {exc}") from exc
-    return Target.from_dict(doc, name=path.stem)
-
-
 class LocalEvaluator:
-    """Evaluates in this process with `sim.evaluate` (numba threads over the batch).
+    """Evaluates in this process with `sim.evaluating` (numba threads over the batch).
 
     Results go into reused buffers (`workers.result_pool`): a buffer is written again
     only once none of its arrays is referenced, so results may be kept indefinitely.
 
     Args:
-        fitness: the `sim.evaluate` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
+        fitness: the `sim.evaluating` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
         mode: "paper" or "legacy".
         target: a published target name or a JSON target file.
         n_angles: crank angles per turn.

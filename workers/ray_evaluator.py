@@ -22,7 +22,7 @@ class EvaluatorWorker:
     """Evaluates genome batches with fixed settings; runs as a Ray actor.
 
     Args:
-        fitness: the `sim.evaluate` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
+        fitness: the `sim.evaluating` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
         mode: "paper" or "legacy".
         target: a published target name or a JSON target file.
         n_angles: crank angles per linkage.
@@ -44,7 +44,7 @@ class ActorPoolEvaluator:
     """Evaluates a batch by splitting it by index across K evaluator actors.
 
     The batch is cut into K contiguous parts (one per actor), evaluated concurrently and
-    put back in order, so the result equals one in-process `sim.evaluate` call. Use
+    put back in order, so the result equals one in-process `sim.evaluating` call. Use
     `start` to create the actors; `close` (or the context manager) kills them.
 
     Args:

@@ -7,25 +7,18 @@ import json
 import math
 import platform
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from linkevo.algorithms import Optimizer, eval_fitness, make_optimizer
+from linkevo.algorithms import Optimizer
 from linkevo.sim import decode, simulate
-from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.path_diversity import path_diversity
 from linkevo.sim.physical import physical_checks
 from linkevo.sim.study import (
-    APPROACHES,
-    DEFAULT_ANGLES,
-    DEFAULT_BATCH,
-    MIN_ANGLES,
-    MODES,
     REPERTOIRE_APPROACHES,
-    SINGLE_FITNESSES,
 )
 from linkevo.workers.checkpoint import (
     CHECKPOINT_FILE,
@@ -34,126 +27,30 @@ from linkevo.workers.checkpoint import (
     load_checkpoint,
     save_checkpoint,
 )
-from linkevo.workers.evaluators import Evaluator, resolve_target
+from linkevo.workers.evaluators import Evaluator
 from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.plots.repertoire import draw_trial_maps
 from linkevo.workers.recorders import MetricsCsv, Recorder
 from linkevo.workers.store.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
-from linkevo.workers.store.run_layout import BEST_JSON, BEST_WALKER, WALK_RERANK
+from linkevo.workers.store.run_layout import (
+    BEST_JSON,
+    BEST_PNG,
+    BEST_WALKER,
+    CHECKPOINT_DIR,
+    ENCODER_PT,
+    METRICS_FILE,
+    RESULT_FILE,
+    SETTINGS_FILE,
+    WALK_RERANK,
+)
+from linkevo.workers.trial_spec import TrialSpec, build_optimizer, resolve_target
 
-CHECKPOINT_DIR = "checkpoint"
-METRICS_FILE = "metrics.csv"
-SETTINGS_FILE = "settings.json"
-RESULT_FILE = "result.json"
-BEST_PNG = "best_linkage.png"
-ENCODER_PT = "encoder.pt"
 FLOAT32_COLUMNS: tuple[str, ...] = ("foot_x", "foot_y")
 """Repertoire columns stored as float32: the foot paths, for drawing and inspection, are
 most of a repertoire's bytes, and 7 digits are far finer than a LEGO build. Everything
 else keeps float64: the genome rebuilds the linkage bit for bit (its genes are cut at
 exact bin edges), losses and descriptors are what statistics and cells are computed
 from, and all are small."""
-
-
-class TrialSpecError(LinkevoError, ValueError):
-    """A trial setting that is not allowed; the message names the value and the choices."""
-
-
-def _is_int(value: object) -> bool:
-    return isinstance(value, int | np.integer) and not isinstance(value, bool)
-
-
-@dataclass(frozen=True)
-class TrialSpec:
-    """One trial: which search, on which loss, for how many evaluations.
-
-    Attributes:
-        approach: one of `sim.study.APPROACHES`.
-        fitness: "Fp" or "Fsl" (NSGA-II evaluates the two-objective variant).
-        evaluations: the budget; the trial runs whole batches while they fit in it (the
-            initial population counts), so it must be >= batch_size.
-        batch_size: children per iteration and initial population size.
-        mode: "paper" or "legacy".
-        seed: seed of the optimizer (>= 0).
-        target: F_p target: "D16", "D24" or a JSON target file.
-        n_angles: crank angles per turn (>= `sim.study.MIN_ANGLES`).
-        checkpoint_every: iterations between checkpoints (>= 1).
-        max_seconds: optional wall-clock limit of one `run_trial` call, checked after each
-            iteration (so at least one runs).
-        options: approach-specific settings passed to `algorithms.make_optimizer`.
-        walk_rerank: walk this many of the final lowest-loss linkages that pass the physical
-            checks on the simulated robot (`rerank_by_walking`); 0: none.
-
-    Raises:
-        TrialSpecError: on construction, for any value outside the allowed ones.
-    """
-
-    approach: str
-    fitness: str
-    evaluations: int
-    batch_size: int = DEFAULT_BATCH
-    mode: str = "paper"
-    seed: int = 0
-    target: str = "D16"
-    n_angles: int = DEFAULT_ANGLES
-    checkpoint_every: int = 10
-    max_seconds: float | None = None
-    options: dict = field(default_factory=dict)
-    walk_rerank: int = 0
-
-    def __post_init__(self) -> None:
-        def fail(message: str) -> None:
-            raise TrialSpecError(message)
-
-        if self.approach not in APPROACHES:
-            fail(f"unknown approach {self.approach!r}; allowed: {', '.join(APPROACHES)}")
-        if self.fitness not in SINGLE_FITNESSES:
-            fail(f"unknown fitness {self.fitness!r}; allowed: {', '.join(SINGLE_FITNESSES)}")
-        if self.mode not in MODES:
-            fail(f"unknown mode {self.mode!r}; allowed: {', '.join(MODES)}")
-        if not _is_int(self.batch_size) or self.batch_size < 1:
-            fail(f"batch size must be a positive integer, got {self.batch_size!r}")
-        if not _is_int(self.evaluations) or self.evaluations < self.batch_size:
-            fail(
-                f"evaluations must be an integer >= the batch size ({self.batch_size}), "
-                f"got {self.evaluations!r}"
-            )
-        if not _is_int(self.seed) or self.seed < 0:
-            fail(f"seed must be a non-negative integer, got {self.seed!r}")
-        if not _is_int(self.n_angles) or self.n_angles < MIN_ANGLES:
-            fail(f"n_angles must be an integer >= {MIN_ANGLES}, got {self.n_angles!r}")
-        if not _is_int(self.walk_rerank) or self.walk_rerank < 0:
-            fail(f"walk_rerank must be an integer >= 0, got {self.walk_rerank!r}")
-        if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
-            fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
-        if self.max_seconds is not None and not (
-            isinstance(self.max_seconds, int | float) and self.max_seconds > 0
-        ):
-            fail(f"max_seconds must be a positive number or None, got {self.max_seconds!r}")
-        if not isinstance(self.options, dict):
-            fail(f"options must be a dict, got {self.options!r}")
-        try:
-            json.dumps(self.options)
-        except TypeError as exc:
-            fail(f"options must be JSON-able ({exc}), got {self.options!r}")
-        try:
-            resolve_target(self.target)
-        except ValueError as exc:
-            fail(str(exc))
-
-    @property
-    def eval_fitness(self) -> str:
-        """The `sim.evaluate` fitness the evaluator must use ("Fp2"/"Fsl2" for NSGA2)."""
-        return eval_fitness(self.approach, self.fitness)
-
-    @property
-    def iterations(self) -> int:
-        """Iterations the budget allows (the initial population is the first)."""
-        return self.evaluations // self.batch_size
-
-    def to_dict(self) -> dict[str, object]:
-        """Returns the JSON-able fields."""
-        return asdict(self)
 
 
 @dataclass(frozen=True)
@@ -183,19 +80,6 @@ class TrialResult:
     seconds: float
     timings: dict[str, float] = field(default_factory=dict)
     stopped_by: str = "budget"
-
-
-def build_optimizer(spec: TrialSpec) -> Optimizer:
-    """Returns the fresh optimizer a spec describes (raises ValueError for bad options)."""
-    return make_optimizer(
-        spec.approach,
-        fitness=spec.fitness,
-        batch_size=spec.batch_size,
-        mode=spec.mode,
-        seed=spec.seed,
-        n_angles=spec.n_angles,
-        **spec.options,
-    )
 
 
 def versions() -> dict[str, str]:

@@ -23,7 +23,8 @@ from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, patiently, use_quick_http
 from linkevo.workers.store.runs import RunStore
-from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec
 
 RETRYABLE_ERRORS: tuple[type[BaseException], ...] = (
     ray.exceptions.RayActorError,

@@ -81,17 +81,19 @@ def run_grid(args: argparse.Namespace) -> int:
     if args.max_concurrent_trials is not None:
         overrides.append(f"max_concurrent_trials={args.max_concurrent_trials}")
     grid = Grid.from_config(grid_config.load(args.config, overrides))
-    from linkevo.orchestrator import driver
-    from linkevo.orchestrator.fan_out import GridInterrupted
-    from linkevo.orchestrator.ray_connection import dry_run_cluster
-    from linkevo.workers.store.outage import ServerLost
-    from linkevo.workers.store.tracking import resolve_tracking_uri
-
     if args.dry_run:
-        driver.trial_specs(grid)  # refuses what the launch would refuse
-        driver.check_store(resolve_tracking_uri(grid.config.tracking_uri or None))
+        from linkevo.orchestrator.launch_checks import check_store, trial_specs
+        from linkevo.orchestrator.ray_connection import dry_run_cluster
+        from linkevo.workers.store.tracking import resolve_tracking_uri
+
+        trial_specs(grid)  # refuses what the launch would refuse
+        check_store(resolve_tracking_uri(grid.config.tracking_uri or None))
         print(describe(grid, dry_run_cluster(args.address)))
         return 0
+    from linkevo.orchestrator import driver
+    from linkevo.orchestrator.fan_out import GridInterrupted
+    from linkevo.workers.store.outage import ServerLost
+
     try:
         result = driver.launch(
             grid,

@@ -21,7 +21,7 @@ def simulate_handler(args: argparse.Namespace) -> int:
     from linkevo.hardware.field_trial import ROBOTS
     from linkevo.orchestrator.simulate import log_simulated, simulate_source, write_pictures
     from linkevo.sim.robot import FLOORS
-    from linkevo.sim.walk import MODELS
+    from linkevo.sim.walking import MODELS
 
     if args.floor not in FLOORS:
         raise CliError(f"--floor {args.floor!r}: allowed {', '.join(FLOORS)}")
@@ -127,7 +127,7 @@ def study_handler(args: argparse.Namespace) -> int:
         raise CliError(f"--repeats {args.repeats}: allowed an integer in [1, {MAX_REPEATS}]")
     if args.out is not None and args.out.suffix != ".csv":
         raise CliError(f"--out {args.out}: allowed a .csv file")
-    from linkevo.sim.walk import MODELS
+    from linkevo.sim.walking import MODELS
 
     if args.model not in MODELS:
         raise CliError(f"--model {args.model!r}: allowed {', '.join(MODELS)}")

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.sim.genome import GenomeError, validate_genomes
 from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, MIN_ANGLES, MODES
-from linkevo.workers.plots.linkage import SUFFIXES
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,6 +52,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def load_genomes(path: Path) -> np.ndarray:
     """Returns the validated (N, 56) genomes stored in a .npy file, or raises CliError."""
+    import numpy as np
+
+    from linkevo.sim.genome import GenomeError, validate_genomes
+
     if path.suffix != ".npy" or not path.is_file():
         raise CliError(f"genome file {str(path)!r} must be an existing .npy file")
     try:  # mapped, not read: a header that claims more rows than the file holds is refused
@@ -71,6 +75,8 @@ def load_genomes(path: Path) -> np.ndarray:
 def _npy_shortfall(path: Path) -> str | None:
     """Says why a .npy file is shorter than its header promises (empty, or a header that
     claims more data than follows it); None when that is not the problem."""
+    import numpy as np
+
     size = path.stat().st_size
     if size == 0:
         return "it is empty"
@@ -117,7 +123,9 @@ def check_angles(angles: int, n_genomes: int = 1) -> None:
 
 def run_eval(args: argparse.Namespace) -> int:
     """Handles `linkevo eval`."""
-    from linkevo.sim.evaluate import evaluate
+    import numpy as np
+
+    from linkevo.sim.evaluating import evaluate
     from linkevo.workers.evaluators import resolve_target
     from linkevo.workers.store.artifacts import write_npz_atomic
 
@@ -151,7 +159,7 @@ def run_eval(args: argparse.Namespace) -> int:
 def run_show(args: argparse.Namespace) -> int:
     """Handles `linkevo show`."""
     from linkevo.sim.linkage_doc import DocumentError, from_document
-    from linkevo.workers.plots.linkage import draw_linkage
+    from linkevo.workers.plots.linkage import SUFFIXES, draw_linkage
     from linkevo.workers.store.artifacts import read_document
 
     check_writable(args.out, SUFFIXES)

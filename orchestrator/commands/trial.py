@@ -17,17 +17,7 @@ from linkevo.sim.study import (
     MODES,
     SINGLE_FITNESSES,
 )
-from linkevo.workers.checkpoint import CheckpointError
-from linkevo.workers.evaluators import LocalEvaluator
-from linkevo.workers.recorders import ProgressRecorder
-from linkevo.workers.trial import (
-    CHECKPOINT_DIR,
-    METRICS_FILE,
-    TrialSpec,
-    TrialSpecError,
-    build_optimizer,
-    run_trial,
-)
+from linkevo.workers.store.run_layout import CHECKPOINT_DIR, METRICS_FILE
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -107,6 +97,11 @@ def check_out_dir(out: Path, resume: bool) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     """Validates everything, runs the trial, prints where the results are."""
+    from linkevo.workers.evaluators import LocalEvaluator
+    from linkevo.workers.recorders import ProgressRecorder
+    from linkevo.workers.trial import run_trial
+    from linkevo.workers.trial_spec import TrialSpec, build_optimizer
+
     try:
         spec = TrialSpec(
             approach=args.approach,
@@ -122,15 +117,13 @@ def handle(args: argparse.Namespace) -> int:
             options=parse_options(args.option),
         )
         build_optimizer(spec)
-    except (TrialSpecError, ValueError, TypeError) as exc:
+    except (ValueError, TypeError) as exc:  # an approach's options, checked by the optimizer
         raise CliError(str(exc)) from exc
     check_out_dir(args.out, args.resume)
     evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
     recorder = ProgressRecorder(spec.evaluations, disable=args.no_progress)
     try:
         result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
-    except CheckpointError as exc:
-        raise CliError(str(exc)) from exc
     finally:
         recorder.close()
     print(

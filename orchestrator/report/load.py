@@ -149,7 +149,7 @@ def _fetch_trial(
     """Returns (metric history, local archive path, local best-linkage path) of one trial
     run; a path is None where the run has no such file."""
     folder = cache_dir / row.run_id
-    csv = _artefact(row.artifact_uri, "metrics.csv", folder, tracking_uri)
+    csv = _artefact(row.artifact_uri, layout.METRICS_FILE, folder, tracking_uri)
     history = pd.read_csv(csv) if csv is not None else _history_from_metrics(client, row)
     archive = None
     for name in ARCHIVE_FILES:

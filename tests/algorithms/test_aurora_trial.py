@@ -10,7 +10,8 @@ import torch
 
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
-from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec
 
 BATCH = 200
 OPTIONS = {

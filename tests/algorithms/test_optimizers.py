@@ -9,7 +9,7 @@ import pytest
 
 from linkevo.algorithms import MapElites, make_optimizer, scalar_loss
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES
-from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluating import evaluate
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import N_GENES
 from linkevo.sim.study import APPROACHES, REPERTOIRE_APPROACHES

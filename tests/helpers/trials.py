@@ -12,7 +12,8 @@ from mlflow.tracking import MlflowClient
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.tracking import ensure_experiment
-from linkevo.workers.trial import TrialSpec, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec
 from linkevo.workers.trial_task import SPEC_PARAMS
 
 

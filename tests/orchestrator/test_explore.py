@@ -21,7 +21,7 @@ from linkevo.sim import decode, simulate
 from linkevo.sim.physical import physical_checks
 from linkevo.workers.store.runs import RunStore, TrialRun
 from linkevo.workers.store.tracking import ensure_experiment
-from linkevo.workers.trial import TrialSpec
+from linkevo.workers.trial_spec import TrialSpec
 from tests.helpers.browser import chromium
 from tests.helpers.trials import record_trials
 

@@ -16,7 +16,7 @@ from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.walkmap import Selection, run_in_process, walk_map
 from linkevo.sim.walk_map import build_cells
 from linkevo.workers.store.runs import RunStore
-from linkevo.workers.trial import TrialSpec
+from linkevo.workers.trial_spec import TrialSpec
 from tests.helpers.browser import chromium
 from tests.helpers.trials import record_trials
 

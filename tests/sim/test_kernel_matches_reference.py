@@ -1,4 +1,4 @@
-"""The fast kernel (`sim.decode`, `sim.simulate`, `sim.evaluate`) equals the plain reference.
+"""The fast kernel (`sim.decoding`, `sim.simulate`, `sim.evaluating`) equals the plain reference.
 
 Both implement the spec independently; they must agree to 1e-9 on every Evaluation field,
 for all four fitnesses and both modes, on random genomes and on heavily mutated ones (many

@@ -9,12 +9,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from linkevo.sim.evaluate import evaluate
+from linkevo.sim.evaluating import evaluate
 from linkevo.sim.genome import random_genomes
 from linkevo.sim.lean_model import build_lean_robot
 from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.robot import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG, Frame, Motor
-from linkevo.sim.walk import LOOP_ERROR_BOUND_MM, WalkSettings, walk
+from linkevo.sim.walking import LOOP_ERROR_BOUND_MM, WalkSettings, walk
 from tests.helpers.walking import crank_leg, jansen_leg
 
 SHORT = WalkSettings(seconds=4.0)

@@ -19,7 +19,8 @@ from linkevo.workers.checkpoint import CheckpointError
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.store.artifacts import read_npz
-from linkevo.workers.trial import TrialSpec, TrialSpecError, build_optimizer, run_trial
+from linkevo.workers.trial import run_trial
+from linkevo.workers.trial_spec import TrialSpec, TrialSpecError, build_optimizer
 
 BATCH = 100
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from linkevo.sim.decode import decode
+from linkevo.sim.decoding import decode
 from linkevo.sim.genome import validate_genomes
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.study import DEFAULT_ANGLES

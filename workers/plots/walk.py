@@ -21,7 +21,7 @@ from matplotlib.figure import Figure
 from PIL import Image
 
 from linkevo.sim.robot import LEG_SLOTS
-from linkevo.sim.walk import Walk
+from linkevo.sim.walking import Walk
 from linkevo.workers.store.artifacts import atomic_path
 
 CAMERA = {"distance": 1.1, "azimuth_deg": 45.0, "elevation_deg": 18.0, "fov_deg": 45.0}

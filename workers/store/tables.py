@@ -22,8 +22,6 @@ from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.genome import N_GENES
 from linkevo.sim.robot import FLOORS
-from linkevo.sim.walk_map import COLUMNS as WALK_MAP_COLUMNS
-from linkevo.sim.walk_map import STATUSES
 
 REPERTOIRE_COLUMNS: tuple[str, ...] = ("cell", "loss", "error", "genome")
 """The columns every repertoire or population holds (with its bins and descriptors)."""
@@ -149,6 +147,8 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
             (cell, floor) pair twice, or a sound walk (walked, not breaking) without a
             finite distance.
     """
+    from linkevo.sim.walk_map import COLUMNS as WALK_MAP_COLUMNS
+    from linkevo.sim.walk_map import STATUSES
     from linkevo.workers.store.run_layout import WALK_MAP
 
     remedy = (

@@ -8,7 +8,7 @@ import numba
 import numpy as np
 
 from linkevo.sim import kernels
-from linkevo.sim.decode import check_mode
+from linkevo.sim.decoding import check_mode
 from linkevo.sim.evaluation import Evaluation, field_shapes
 from linkevo.sim.fitness import FITNESS_CODES, N_OBJECTIVES, Target, check_fitness, named_target
 from linkevo.sim.genome import validate_genomes

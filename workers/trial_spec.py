@@ -1,0 +1,176 @@
+"""Provides `TrialSpec`: one trial's settings, checked where they enter, and the optimizer
+they describe."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from linkevo.sim.errors import LinkevoError
+from linkevo.sim.study import (
+    APPROACHES,
+    DEFAULT_ANGLES,
+    DEFAULT_BATCH,
+    MIN_ANGLES,
+    MODES,
+    MULTI_OBJECTIVE,
+    SINGLE_FITNESSES,
+    TARGETS,
+    evaluated_fitness,
+)
+
+if TYPE_CHECKING:
+    from linkevo.algorithms import Optimizer
+    from linkevo.sim.fitness import Target
+
+
+class TrialSpecError(LinkevoError, ValueError):
+    """A trial setting that is not allowed; the message names the value and the choices."""
+
+
+def _is_int(value: object) -> bool:
+    return isinstance(value, int | np.integer) and not isinstance(value, bool)
+
+
+@dataclass(frozen=True)
+class TrialSpec:
+    """One trial: which search, on which loss, for how many evaluations.
+
+    Attributes:
+        approach: one of `sim.study.APPROACHES`.
+        fitness: "Fp" or "Fsl" (NSGA-II evaluates the two-objective variant).
+        evaluations: the budget; the trial runs whole batches while they fit in it (the
+            initial population counts), so it must be >= batch_size.
+        batch_size: children per iteration and initial population size.
+        mode: "paper" or "legacy".
+        seed: seed of the optimizer (>= 0).
+        target: F_p target: "D16", "D24" or a JSON target file.
+        n_angles: crank angles per turn (>= `sim.study.MIN_ANGLES`).
+        checkpoint_every: iterations between checkpoints (>= 1).
+        max_seconds: optional wall-clock limit of one `run_trial` call, checked after each
+            iteration (so at least one runs).
+        options: approach-specific settings passed to `algorithms.make_optimizer`.
+        walk_rerank: walk this many of the final lowest-loss linkages that pass the physical
+            checks on the simulated robot (`rerank_by_walking`); 0: none.
+
+    Raises:
+        TrialSpecError: on construction, for any value outside the allowed ones.
+    """
+
+    approach: str
+    fitness: str
+    evaluations: int
+    batch_size: int = DEFAULT_BATCH
+    mode: str = "paper"
+    seed: int = 0
+    target: str = "D16"
+    n_angles: int = DEFAULT_ANGLES
+    checkpoint_every: int = 10
+    max_seconds: float | None = None
+    options: dict = field(default_factory=dict)
+    walk_rerank: int = 0
+
+    def __post_init__(self) -> None:
+        def fail(message: str) -> None:
+            raise TrialSpecError(message)
+
+        if self.approach not in APPROACHES:
+            fail(f"unknown approach {self.approach!r}; allowed: {', '.join(APPROACHES)}")
+        if self.fitness not in SINGLE_FITNESSES:
+            fail(f"unknown fitness {self.fitness!r}; allowed: {', '.join(SINGLE_FITNESSES)}")
+        if self.mode not in MODES:
+            fail(f"unknown mode {self.mode!r}; allowed: {', '.join(MODES)}")
+        if not _is_int(self.batch_size) or self.batch_size < 1:
+            fail(f"batch size must be a positive integer, got {self.batch_size!r}")
+        if not _is_int(self.evaluations) or self.evaluations < self.batch_size:
+            fail(
+                f"evaluations must be an integer >= the batch size ({self.batch_size}), "
+                f"got {self.evaluations!r}"
+            )
+        if not _is_int(self.seed) or self.seed < 0:
+            fail(f"seed must be a non-negative integer, got {self.seed!r}")
+        if not _is_int(self.n_angles) or self.n_angles < MIN_ANGLES:
+            fail(f"n_angles must be an integer >= {MIN_ANGLES}, got {self.n_angles!r}")
+        if not _is_int(self.walk_rerank) or self.walk_rerank < 0:
+            fail(f"walk_rerank must be an integer >= 0, got {self.walk_rerank!r}")
+        if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
+            fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
+        if self.max_seconds is not None and not (
+            isinstance(self.max_seconds, int | float) and self.max_seconds > 0
+        ):
+            fail(f"max_seconds must be a positive number or None, got {self.max_seconds!r}")
+        if not isinstance(self.options, dict):
+            fail(f"options must be a dict, got {self.options!r}")
+        try:
+            json.dumps(self.options)
+        except TypeError as exc:
+            fail(f"options must be JSON-able ({exc}), got {self.options!r}")
+        try:
+            resolve_target(self.target)
+        except ValueError as exc:
+            fail(str(exc))
+
+    @property
+    def eval_fitness(self) -> str:
+        """The `sim.evaluating` fitness the evaluator must use ("Fp2"/"Fsl2" for NSGA2)."""
+        return evaluated_fitness(self.fitness, self.approach in MULTI_OBJECTIVE)
+
+    @property
+    def iterations(self) -> int:
+        """Iterations the budget allows (the initial population is the first)."""
+        return self.evaluations // self.batch_size
+
+    def to_dict(self) -> dict[str, object]:
+        """Returns the JSON-able fields."""
+        return asdict(self)
+
+
+def resolve_target(target: str) -> Target:
+    """Returns the F_p target named `target` ("D16", "D24") or stored in a JSON file.
+
+    Raises:
+        ValueError: naming the value when it is neither a published name nor a readable
+            JSON target file.
+    """
+    from linkevo.sim.fitness import Target, named_target
+
+    if target in TARGETS:
+        return named_target(target)
+    path = Path(target)
+    if not path.is_file():
+        raise ValueError(
+            f"target {target!r} is neither a published target ({', '.join(TARGETS)}) "
+            "nor an existing JSON file"
+        )
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ValueError(f"target file {target!r} is not readable JSON: {exc}") from exc
+    return Target.from_dict(doc, name=path.stem)
+
+
+def build_optimizer(spec: TrialSpec) -> Optimizer:
+    """Returns the fresh optimizer a spec describes (raises ValueError for bad options)."""
+    from linkevo.algorithms import make_optimizer
+
+    return make_optimizer(
+        spec.approach,
+        fitness=spec.fitness,
+        batch_size=spec.batch_size,
+        mode=spec.mode,
+        seed=spec.seed,
+        n_angles=spec.n_angles,
+        **spec.options,
+    )
+
+
+def check_spec_options(spec: TrialSpec) -> None:
+    """Raises ValueError, naming the option, for options its approach would refuse, without
+    building the optimizer where that is costly (MAP-AU's autoencoder needs torch)."""
+    from linkevo.algorithms.factory import check_options
+
+    check_options(spec.approach, spec.options)
