@@ -22,7 +22,6 @@ Prints three measurements:
 from __future__ import annotations
 
 import argparse
-import os
 import subprocess
 import sys
 import tempfile
@@ -32,8 +31,9 @@ from pathlib import Path
 import numba
 import numpy as np
 import ray
+from trees import tree_env  # benchmarks/trees.py, beside this script
 
-from linkevo.orchestrator.driver import trial_specs
+from linkevo.orchestrator.launch_checks import trial_specs
 from linkevo.sim import named_target, random_genomes
 from linkevo.sim.reference import evaluate_reference
 from linkevo.workers.evaluators import LocalEvaluator
@@ -183,22 +183,11 @@ def tracking_overhead(work: Path, iterations: int, rounds: int = 11) -> None:
 
 
 def quick_grid_seconds(tree: Path, store: Path, work: Path) -> float:
-    """Runs `linkevo grid configs/quick.toml` of the code in `tree` on a fresh `store`;
-    returns its wall time in seconds.
-
-    The package is imported from `tree` through a folder holding `linkevo/<layer>` links
-    to the tree's layer folders, put first on PYTHONPATH (as the installed namespace maps
-    them), so two checkouts can be timed by one interpreter and environment.
-    """
-    names = work / f"names-{abs(hash(tree))}" / "linkevo"
-    names.mkdir(parents=True, exist_ok=True)
-    for layer in ("sim", "algorithms", "workers", "orchestrator", "hardware"):
-        link = names / layer
-        if not link.exists():
-            link.symlink_to(tree / layer, target_is_directory=True)
+    """Runs `linkevo grid configs/quick.toml` of the code in `tree` on a fresh `store`
+    (`benchmarks.trees.tree_env`); returns its wall time in seconds."""
     command = [sys.executable, "-m", "linkevo.orchestrator", "grid", "configs/quick.toml",
                "--tracking-uri", str(store), "--no-progress"]  # fmt: skip
-    env = {**os.environ, "PYTHONPATH": str(names.parent)}
+    env = tree_env(tree, work)
     start = time.perf_counter()
     done = subprocess.run(command, capture_output=True, text=True, cwd=tree, env=env, check=False)
     seconds = time.perf_counter() - start

@@ -98,9 +98,9 @@ def repertoire_view(
         json_floats(checks.size_modules[:, 1], 1),
     ]
     bins = table[bins_of].to_numpy().astype(int).tolist()
-    descriptors = json_floats(table[desc_columns].to_numpy(), 3)
+    descriptors = json_floats(table.reindex(columns=desc_columns).to_numpy(dtype=float), 3)
     loss = json_floats(table["loss"].to_numpy(), 4)
-    error = table["error"].to_numpy().astype(int).tolist()
+    error = (~motion.valid).sum(axis=1).astype(int).tolist()  # failed crank angles
     floors, walked = _walked(walks)
     cells = []
     for i, cell in enumerate(table["cell"].to_numpy().astype(int).tolist()):

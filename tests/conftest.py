@@ -1,4 +1,5 @@
-"""Fixtures shared by every test package."""
+"""Fixtures shared by every test package, and the one worker that runs every test module
+that starts Ray."""
 
 from __future__ import annotations
 
@@ -6,6 +7,29 @@ import numpy as np
 import pytest
 
 from linkevo.workers.evaluators import Evaluator
+
+RAY_MODULES = frozenset(
+    {
+        "tests/orchestrator/test_cluster.py",
+        "tests/orchestrator/test_driver.py",
+        "tests/orchestrator/test_grid_faults.py",
+        "tests/orchestrator/test_local_cluster.py",
+        "tests/orchestrator/test_report_grid.py",
+        "tests/orchestrator/test_walkmap.py",
+        "tests/workers/test_ray_evaluator.py",
+    }
+)
+"""The modules whose tests start Ray (in process, or through `linkevo` subprocesses)."""
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Puts every test that starts Ray on one pytest-xdist worker (`--dist loadgroup`): one
+    Ray instance at a time, as on a developer's machine; every other test is spread over
+    the cores meanwhile."""
+    root = config.rootpath
+    for item in items:
+        if item.path.relative_to(root).as_posix() in RAY_MODULES:
+            item.add_marker(pytest.mark.xdist_group("ray"))
 
 
 class CrashingEvaluator:

@@ -70,8 +70,6 @@ def grid_trials(store: RunStore, grid_id: str, approach: str | None, fitness: st
         CliError: naming an unknown approach or fitness with the valid choices, or asking
             for --fitness when the grid has more than one.
     """
-    if not layout.ID_PATTERN.fullmatch(grid_id):
-        raise CliError(f"{grid_id!r} is not a grid id; allowed: letters, digits, '.', '_', '-'")
     store.grid(grid_id)
     trials = store.trial_runs(grid_id, status="FINISHED")
     choices = {

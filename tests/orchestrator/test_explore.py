@@ -126,10 +126,10 @@ def test_explore_refuses_bad_input_before_writing(store, tmp_path, capsys):
     cases = [
         (
             [runs["EA"]],
-            "is a EA trial, which keeps a population, not a repertoire; explore a "
+            "is a EA trial, which keeps a population, not a repertoire; give a "
             "trial of MAP-WH, MAP-LIS, MAP-ST, MAP-AU, RANDOM or a grid id",
         ),
-        (["ffff00001111"], f"known grids: ['{GRID}']"),
+        (["ffff00001111"], f"known grids: {GRID}"),
         ([runs["MAP-ST"], "--drawn", "0"], "--drawn 0: give the number of cells to draw, >= 1"),
         (["it's"], '"it\'s" is neither a run id nor a grid id; allowed: letters, digits'),
     ]

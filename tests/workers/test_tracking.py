@@ -18,22 +18,21 @@ from linkevo.workers.store.tracking import (
 OPEN_STORE = """
 import sys, time
 from linkevo.workers.store.tracking import ensure_experiment
-start = float(sys.argv[2])
-while time.time() < start:
-    pass
+time.sleep(max(0.0, float(sys.argv[2]) - time.time()))  # all at once, none spinning
 print(ensure_experiment(sys.argv[1], "linkevo"))
 """
 
 
 def test_processes_opening_a_fresh_store_together_all_get_one_experiment(tmp_path: Path):
     """Without the lock MLflow's concurrent schema creation fails one or both writers
-    (`duplicate column name`) and can leave `_alembic_tmp_*` tables behind."""
+    (`duplicate column name`) and can leave `_alembic_tmp_*` tables behind. Three stores,
+    three processes each, all nine opening at the same instant."""
     root = Path(__file__).resolve().parents[2]
-    for attempt in range(3):
-        uri = f"sqlite:///{tmp_path / f'store{attempt}' / 'mlflow.db'}"
-        # Both processes import mlflow first, then open the store at the same instant.
-        start = __import__("time").time() + 6.0
-        procs = [
+    uris = [f"sqlite:///{tmp_path / f'store{attempt}' / 'mlflow.db'}" for attempt in range(3)]
+    # Every process imports mlflow first, then opens its store at the same instant.
+    start = __import__("time").time() + 12.0
+    procs = {
+        uri: [
             subprocess.Popen(
                 [sys.executable, "-c", OPEN_STORE, uri, str(start)],
                 cwd=root,
@@ -43,8 +42,11 @@ def test_processes_opening_a_fresh_store_together_all_get_one_experiment(tmp_pat
             )
             for _ in range(3)
         ]
-        outputs = [p.communicate(timeout=120) for p in procs]
-        for proc, (_, err) in zip(procs, outputs, strict=True):
+        for uri in uris
+    }
+    for uri, started in procs.items():
+        outputs = [p.communicate(timeout=120) for p in started]
+        for proc, (_, err) in zip(started, outputs, strict=True):
             assert proc.returncode == 0, err[-2000:]
         ids = {out.strip() for out, _ in outputs}
         assert len(ids) == 1

@@ -142,12 +142,14 @@ class RunStore:
         Raises:
             NotFound: no such experiment or grid; the message lists the known grids.
         """
-        runs = self.grid_runs(grid_id, limit=1)
+        wellformed = grid_id is None or layout.ID_PATTERN.fullmatch(grid_id)
+        runs = self.grid_runs(grid_id, limit=1) if wellformed else []
         if not runs:
             known = sorted({r.data.tags.get(layout.GRID_ID, "?") for r in self.grid_runs(limit=20)})
             wanted = "any grid" if grid_id is None else f"grid {grid_id!r}"
             raise NotFound(
-                f"no {wanted} in experiment {self.experiment!r}; known grids: {known or 'none'}"
+                f"no {wanted} in experiment {self.experiment!r}; known grids: "
+                f"{', '.join(known) or 'none'}"
             )
         run = runs[0]
         try:

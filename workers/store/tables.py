@@ -23,8 +23,8 @@ from linkevo.sim.errors import LinkevoError
 from linkevo.sim.genome import N_GENES
 from linkevo.sim.robot import FLOORS
 
-REPERTOIRE_COLUMNS: tuple[str, ...] = ("cell", "loss", "error", "genome")
-"""The columns every repertoire or population holds (with its bins and descriptors)."""
+REPERTOIRE_COLUMNS: tuple[str, ...] = ("cell", "loss", "genome")
+"""The columns every reader of a repertoire or population needs (with its bins)."""
 
 
 class ArtefactError(LinkevoError, ValueError):
@@ -133,8 +133,6 @@ def read_repertoire(path: Path, run_id: str, name: str) -> pd.DataFrame:
         values = table[bins].to_numpy()
         if values.dtype.kind != "i" or (values < 0).any():
             raise fail("has bins that are not non-negative integers")
-        if any(f"desc_{c.removeprefix('bin_')}" not in table.columns for c in bins):
-            raise fail("has bins without their descriptors")
     return table
 
 
