@@ -110,8 +110,7 @@ def _bare(robot, ticks: int) -> None:
     data.ctrl[:] = 2.6
     steps = round(0.02 / model.opt.timestep)
     for _ in range(ticks):
-        if robot.coupling is not None:
-            robot.coupling.update(model, data)
+        robot.loads.update(model, data)
         mujoco.mj_step(model, data, nstep=steps)
 
 

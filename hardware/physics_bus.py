@@ -30,6 +30,7 @@ from linkevo.hardware.emulated_motor import EmulatedMotor
 from linkevo.sim.lean_model import build_lean_robot
 from linkevo.sim.leg import Leg
 from linkevo.sim.robot import LEG_SLOTS, Floor, Frame, Motor
+from linkevo.sim.robot_model import control_tick
 
 HOLDING_NM = 0.5
 """Torque the gearbox of a motor with torque off holds before it back-drives (estimate)."""
@@ -71,7 +72,7 @@ class PhysicsWorld:
             dict.fromkeys(LEG_SLOTS, leg), phases, floor, frame=frame, motor=self.motor
         )
         self.model, self.data = self.robot.model, mujoco.MjData(self.robot.model)
-        self.robot.coupling.update(self.model, self.data)
+        self.robot.loads.update(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
         self.slot_of = {m.id: LEG_SLOTS.index(m.name) for m in config.motors}
         self._mounts = {m.id: (m.direction, m.zero) for m in config.motors}
@@ -97,18 +98,17 @@ class PhysicsWorld:
             step = m.opt.timestep
             while d.time + step / 2 < target:
                 chunk = max(1, min(round(_TICK_S / step), round((target - d.time) / step)))
+                goal = d.ctrl[robot.actuators].copy()
+                limits = m.actuator_forcerange[robot.actuators].copy()
                 for motor_id, motor in self.motors.items():
                     i = self.slot_of[motor_id]
                     speed = float(d.qvel[robot.crank_dof[i]])
                     if motor.torque_on:
-                        goal = motor.direction * motor.commanded_units() * _RAD_S_PER_UNIT
-                        low, high = self.motor.torque_limits(np.array(speed))
+                        goal[i] = motor.direction * motor.commanded_units() * _RAD_S_PER_UNIT
+                        limits[i] = self.motor.torque_limits(np.array(speed))
                     else:
-                        goal, low, high = 0.0, -HOLDING_NM, HOLDING_NM
-                    d.ctrl[robot.actuators[i]] = goal
-                    m.actuator_forcerange[robot.actuators[i]] = (low, high)
-                robot.coupling.update(m, d)
-                mujoco.mj_step(m, d, nstep=chunk)
+                        goal[i], limits[i] = 0.0, (-HOLDING_NM, HOLDING_NM)
+                control_tick(robot, d, goal, limits, chunk)
 
     def crank(self, motor_id: int) -> tuple[float, float, float]:
         """Returns (phase rad, speed rad/s, torque N·m) of the motor's crank, in the

@@ -12,7 +12,8 @@ from linkevo.hardware.field_trial import PHYSICS, log_field_trial
 from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.linkage_doc import DocumentError, from_document
 from linkevo.sim.robot import LEG_SLOTS, floor
-from linkevo.sim.walking import Walk, WalkSettings, field_trials, summary
+from linkevo.sim.walk_figures import summary
+from linkevo.sim.walking import Walk, WalkSettings, field_trials
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.linkages import SourceLinkage
 

@@ -2,7 +2,7 @@
 
 A leg is a one-degree-of-freedom mechanism: its crank angle fixes every beam. The lean model
 keeps the crank (the motor's hinge) and, as bodies, only the rigid parts that can reach the
-floor (`sim.walk_model.floor_reach`), each free in the leg's plane (two slides and a hinge)
+floor (`sim.robot_model.floor_reach`), each free in the leg's plane (two slides and a hinge)
 and tied to the crank by three `joint` equalities: the part's x, z and angle as functions
 of the crank angle, taken from the leg's poses (`Leg.paths`). MuJoCo's joint equality is a
 quartic in the crank angle, so `Coupling.update` re-centres it on the crank's angle at every
@@ -26,12 +26,14 @@ import mujoco
 import numpy as np
 
 from linkevo.sim.leg import Leg
-from linkevo.sim.robot import BEAM_KG_PER_MODULE, BEAM_RADIUS_M, LEG_SLOTS, Floor, Frame, Motor
-from linkevo.sim.walk_model import (
+from linkevo.sim.robot import BEAM_RADIUS_M, LEG_SLOTS, UNIT_M, Floor, Frame, Motor
+from linkevo.sim.robot_model import (
+    BEAM_RGBA,
     LEG_CONTACT,
-    UNIT_M,
     RobotModel,
+    add_beam,
     add_motor,
+    beam_kg,
     check_slots,
     floor_reach,
     leg_frame,
@@ -90,6 +92,41 @@ class Coupling:
     crank_qpos: np.ndarray
     statics: tuple[LegStatics, ...]
     n_poses: int
+
+    @property
+    def width(self) -> int:
+        """A sample: each leg's pose index (6), then each coupling's force and error (C
+        each)."""
+        return 6 + 2 * len(self.equalities)
+
+    def sample(self, model: mujoco.MjModel, data: mujoco.MjData, out: np.ndarray) -> None:
+        """Writes the legs' poses and the couplings' forces and errors (`width`): the
+        equalities' rows come first in the constraint arrays, in id order."""
+        n = len(self.equalities)
+        out[:6] = self.poses(data)
+        out[6 : 6 + n] = data.efc_force[:n]
+        out[6 + n :] = np.abs(data.efc_pos[:n]) * self.scale
+
+    def pin_forces(self, samples: np.ndarray) -> np.ndarray:
+        """Returns every pin's force at every sample, all legs: the statics of each leg's
+        mechanism under its couplings' forces (`LegStatics`)."""
+        n = len(self.equalities)
+        poses = samples[:, :6].astype(np.int64)  # (S, 6)
+        forces = samples[:, 6 : 6 + n]  # (S, C)
+        pins = []
+        for statics in {id(s): s for s in self.statics}.values():  # legs alike: one solve
+            slots = [i for i, s in enumerate(self.statics) if s is statics]
+            wrench = np.concatenate(
+                [forces[:, self.leg == i].reshape(len(forces), -1, 3) for i in slots]
+            )  # (S * slots, K, 3): x, z, angle, in the frame's coordinates
+            wrench = wrench * np.array([-statics.leg.facing(), 1.0, 1.0])  # linkage's frame
+            pins.append(statics.pin_forces(poses[:, slots].T.ravel(), wrench).ravel())
+        return np.concatenate(pins)
+
+    def loop_errors(self, samples: np.ndarray) -> np.ndarray:
+        """Returns every coupling's error (m) at every sample."""
+        n = len(self.equalities)
+        return samples[:, 6 + n :].ravel()
 
     def poses(self, data: mujoco.MjData) -> np.ndarray:
         """Returns (6,) int each leg's nearest pose index (unwrapped: may exceed A)."""
@@ -196,8 +233,8 @@ def build_lean_robot(
     drop: float = 0.002,
 ) -> RobotModel:
     """Returns the lean robot standing just above the floor; arguments as
-    `sim.walk_model.build_robot`. Its `coupling` holds the equalities to re-centre and the
-    pin statics of each slot."""
+    `sim.full_model.build_robot`. Its `loads` (a `Coupling`) hold the equalities to
+    re-centre and the pin statics of each slot."""
     frame = frame or Frame()
     motor = motor or Motor()
     check_slots(legs, phases)
@@ -209,7 +246,6 @@ def build_lean_robot(
     )  # fmt: skip
     spec, body = robot_spec(floor, frame, timestep, extra_kg=carried)
     rows: list[_Row] = []
-    bodies: list[str] = []
     lowest = -frame.height / 2
     for i, slot in enumerate(LEG_SLOTS):
         leg, world = legs[slot], leg_frame(slot, legs[slot], frame)
@@ -235,7 +271,6 @@ def build_lean_robot(
             else:
                 origin = world(nodes[pivot], int(leg.layer[members[0]]))
                 target = body.add_body(name=f"{slot}/part{part}", pos=origin.tolist())
-                bodies.append(target.name)
                 rows += _couple(spec, target, slot, i, leg, part, pivot, pose)
             sites[part] = (target, origin)
             for b in members[reach[slot][members]]:
@@ -269,7 +304,7 @@ def build_lean_robot(
         statics=tuple(statics[id(legs[s])] for s in LEG_SLOTS),
         n_poses=legs[LEG_SLOTS[0]].paths.shape[1],
     )
-    return robot_model(model, legs, phases, leg_bodies=bodies, coupling=coupling)
+    return robot_model(model, legs, phases, coupling)
 
 
 @dataclass(frozen=True)
@@ -292,22 +327,15 @@ def _pose_index(leg: Leg, phase: float) -> int:
 
 def _beam_kg(leg: Leg, b: int) -> float:
     length = float(np.linalg.norm(leg.paths[leg.beams[b, 0], 0] - leg.paths[leg.beams[b, 1], 0]))
-    return max(length, 0.5) * BEAM_KG_PER_MODULE
+    return beam_kg(length)
 
 
 def _add_beam(target, origin, world, leg: Leg, nodes: np.ndarray, b: int) -> float:
-    """Adds beam b to a body as a capsule that touches the floor; returns its lowest
+    """Adds beam b to a body as a beam that touches the floor; returns its lowest
     centre-line height in the frame's coordinates."""
     layer = int(leg.layer[b])
     start, end = world(nodes[leg.beams[b, 0]], layer), world(nodes[leg.beams[b, 1]], layer)
-    geom = {"mass": _beam_kg(leg, b), "size": [BEAM_RADIUS_M, 0, 0],
-            "rgba": [0.75, 0.75, 0.78, 1], **LEG_CONTACT}  # fmt: skip
-    if np.linalg.norm(end - start) > 1e-6:
-        target.add_geom(
-            type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[*(start - origin), *(end - origin)], **geom
-        )
-    else:
-        target.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, pos=(start - origin).tolist(), **geom)
+    add_beam(target, origin, start, end, mass=_beam_kg(leg, b), contact=LEG_CONTACT, rgba=BEAM_RGBA)
     return float(min(start[2], end[2]))
 
 

@@ -14,34 +14,25 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
-import statistics
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
+from linkevo.sim.full_model import TIMESTEP_S, build_robot
 from linkevo.sim.gait import GaitConfig, PhasePid
-from linkevo.sim.lean_model import LEAN_TIMESTEP_S, Coupling, build_lean_robot
+from linkevo.sim.lean_model import LEAN_TIMESTEP_S, build_lean_robot
 from linkevo.sim.leg import Leg
 from linkevo.sim.robot import LEG_SLOTS, TRIPOD_OFFSETS_DEG, WALK_SECONDS, Floor, Frame, Motor
-from linkevo.sim.walk_model import TIMESTEP_S, RobotModel, build_robot
+from linkevo.sim.robot_model import RobotModel, control_tick
+from linkevo.sim.walk_figures import break_reason, foot_slip, wrap_angle, yaw_of
 
 MODELS = {"lean": (build_lean_robot, LEAN_TIMESTEP_S), "full": (build_robot, TIMESTEP_S)}
 """The robot models a walk can run on, with their default physics steps: `lean` (each leg
 reduced to the parts that meet the floor, `sim.lean_model`; the default) and `full` (every
-beam a body, `sim.walk_model`; for pictures and cross-checks)."""
+beam a body, `sim.full_model`; for pictures and cross-checks)."""
 
-STALL_LAG_DEG = 45.0
-"""A leg this far behind the clock with its motor at the supply limit has stalled."""
-STALL_SATURATED = 0.05
-"""... and its motor at the limit for at least this share of the walk."""
-FRAME_DRAG_SHARE = 0.2
-"""The frame touching the floor for more than this share of the walk: the legs cannot
-carry it."""
-PIN_FORCE_LIMIT_N = 60.0
-"""The 99th-percentile pin force above which a LEGO Technic pin joint is taken to fail
-(beams spread and the pin walks out); an estimate, see docs/walking.md."""
 MIN_TIMESTEP_S = 0.0005
 """A walk that diverges is walked again at half the step, down to this one."""
 LOOP_ERROR_BOUND_MM = 2.0
@@ -200,6 +191,47 @@ def _quiet_engine() -> Iterator[None]:
         mujoco.set_mju_user_warning(previous)
 
 
+@dataclass
+class _Records:
+    """A walk's per-tick records, preallocated for its T ticks (S of them sampling loads).
+
+    Attributes:
+        t: (T,) time; body: (T, 3) frame position; mat: (T, 9) frame orientation;
+        phase: (T, 6) crank phases; qpos: (T, nq) the state; torque: (T, 6) motor torques;
+        limits: (T, 6, 2) their bounds; feet: (T, 6, 3) foot sites; frame: (T,) the frame
+        touches the floor; contact: (T, 6) each leg touches it; loads: (S, width) the
+        model's load samples (`sim.robot_model.LegLoads`).
+    """
+
+    t: np.ndarray
+    body: np.ndarray
+    mat: np.ndarray
+    phase: np.ndarray
+    qpos: np.ndarray
+    torque: np.ndarray
+    limits: np.ndarray
+    feet: np.ndarray
+    frame: np.ndarray
+    contact: np.ndarray
+    loads: np.ndarray
+
+    @classmethod
+    def empty(cls, ticks: int, samples: int, nq: int, width: int) -> _Records:
+        return cls(
+            t=np.empty(ticks),
+            body=np.empty((ticks, 3)),
+            mat=np.empty((ticks, 9)),
+            phase=np.empty((ticks, 6)),
+            qpos=np.empty((ticks, nq)),
+            torque=np.empty((ticks, 6)),
+            limits=np.empty((ticks, 6, 2)),
+            feet=np.empty((ticks, 6, 3)),
+            frame=np.zeros(ticks, dtype=bool),
+            contact=np.zeros((ticks, 6), dtype=bool),
+            loads=np.empty((samples, width)),
+        )
+
+
 class _Run:
     """One walk of a compiled robot: the control loop and the records it keeps."""
 
@@ -217,21 +249,18 @@ class _Run:
         m = robot.model
         self.data = mujoco.MjData(m)
         self.tick_steps = max(1, round(1.0 / gait.rate_hz / settings.step))
-        self.coupling: Coupling | None = robot.coupling  # type: ignore[assignment]
         body_leg = np.full(m.nbody, -1)
         for i, slot in enumerate(LEG_SLOTS):
             for b in range(m.nbody):
                 if mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, b).startswith(f"{slot}/"):
                     body_leg[b] = i
         self.geom_leg = body_leg[m.geom_bodyid]
-        self.n_loops = len(robot.loop_pins)
 
     def run(self, yaw: float, shift: np.ndarray) -> Walk:
         m, d, robot = self.robot.model, self.data, self.robot
         d.qpos[0:2] += shift
         d.qpos[3:7] = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]
-        if self.coupling is not None:
-            self.coupling.update(m, d)
+        robot.loads.update(m, d)
         mujoco.mj_forward(m, d)
         hold = PhasePid(dataclasses.replace(self.gait, speed_rpm=0.0), self.offsets)
         hold.reset(0.0)
@@ -241,83 +270,63 @@ class _Run:
                 return self._diverged()
         pid = PhasePid(self.gait, self.offsets)
         pid.reset(d.time)
-        p0, yaw0 = d.xpos[robot.frame_body].copy(), _yaw(d.xmat[robot.frame_body])
+        p0, yaw0 = d.xpos[robot.frame_body].copy(), yaw_of(d.xmat[robot.frame_body])
         self.phase0 = self.phases()
         n_ticks = round(self.settings.seconds * self.gait.rate_hz)
-        rec = {k: [] for k in ("t", "body", "mat", "torque", "limits", "feet", "contact")}
-        rec |= {"frame": [], "pins": [], "loops": [], "phase": [], "qpos": [], "poses": []}
+        every = self.settings.loads_every
+        rec = _Records.empty(n_ticks, -(-n_ticks // every), m.nq, robot.loads.width)
         for tick in range(n_ticks):
             if not self._tick(pid):
                 return self._diverged()
-            self._record(rec, loads=tick % self.settings.loads_every == 0)
+            self._record(rec, tick)
+            if tick % every == 0:
+                robot.loads.sample(m, d, rec.loads[tick // every])
         return self._result(rec, pid, p0, yaw0)
 
     def phases(self) -> np.ndarray:
         return self.robot.start_phases + self.data.qpos[self.robot.crank_qpos]
 
     def _tick(self, pid: PhasePid) -> bool:
-        """One control tick: the gait's command as the motors' speed goal, their torque
-        limits at the speed they turn now, the lean model's couplings re-centred, then the
-        physics over the tick."""
-        m, d, motor, robot = self.robot.model, self.data, self.motor, self.robot
+        """One control tick (`sim.robot_model.control_tick`): the gait's command as the
+        motors' speed goal, their torque limits at the speed they turn now."""
+        d, motor, robot = self.data, self.motor, self.robot
         rpm = np.clip(pid.rpm(d.time, self.phases()), -motor.velocity_limit_rpm,
                       motor.velocity_limit_rpm)  # fmt: skip
-        d.ctrl[robot.actuators] = rpm * (2 * math.pi / 60)
-        m.actuator_forcerange[robot.actuators] = motor.torque_limits(d.qvel[robot.crank_dof])
-        if self.coupling is not None:
-            self.coupling.update(m, d)
-        mujoco.mj_step(m, d, nstep=self.tick_steps)
+        limits = motor.torque_limits(d.qvel[robot.crank_dof])
+        control_tick(robot, d, rpm * (2 * math.pi / 60), limits, self.tick_steps)
         # MuJoCo resets the state when accelerations blow up, and counts it as a warning.
         blown = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
         return not blown and bool(np.isfinite(d.qpos).all()) and abs(d.qpos[2]) < 10.0
 
-    def _record(self, rec: dict, loads: bool) -> None:
-        """Keeps what the tick left: the state, the motors' torques and limits, contacts,
-        and every `loads_every` ticks the loads (what needs the whole walk is computed
-        from these at its end, `_result`)."""
+    def _record(self, rec: _Records, tick: int) -> None:
+        """Keeps what the tick left: the state, the motors' torques and limits, contacts
+        (what needs the whole walk is computed from these at its end, `_result`)."""
         m, d, robot = self.robot.model, self.data, self.robot
-        rec["t"].append(d.time)
-        rec["body"].append(d.xpos[robot.frame_body].copy())
-        rec["mat"].append(d.xmat[robot.frame_body].copy())
-        rec["phase"].append(self.phases())
-        rec["qpos"].append(d.qpos.copy())
-        rec["torque"].append(d.actuator_force[robot.actuators])  # fancy indexing: a copy
-        rec["limits"].append(m.actuator_forcerange[robot.actuators])
-        rec["feet"].append(d.site_xpos[robot.foot_sites].copy())
-        geoms = d.contact.geom[: d.ncon] if d.ncon else np.zeros((0, 2), dtype=int)
-        touching = geoms.ravel()
-        rec["frame"].append(bool((touching == robot.frame_geom).any()))
+        rec.t[tick] = d.time
+        rec.body[tick] = d.xpos[robot.frame_body]
+        rec.mat[tick] = d.xmat[robot.frame_body]
+        rec.phase[tick] = self.phases()
+        rec.qpos[tick] = d.qpos
+        rec.torque[tick] = d.actuator_force[robot.actuators]
+        rec.limits[tick] = m.actuator_forcerange[robot.actuators]
+        rec.feet[tick] = d.site_xpos[robot.foot_sites]
+        touching = d.contact.geom[: d.ncon].ravel() if d.ncon else np.zeros(0, dtype=int)
+        rec.frame[tick] = bool((touching == robot.frame_geom).any())
         legs = self.geom_leg[touching]
-        contact = np.zeros(6, dtype=bool)
-        contact[legs[legs >= 0]] = True
-        rec["contact"].append(contact)
-        if not loads:
-            return
-        if self.coupling is not None:
-            n = len(self.coupling.equalities)  # equality rows come first, in id order
-            rec["poses"].append(self.coupling.poses(d))
-            rec["pins"].append(d.efc_force[:n].copy())
-            rec["loops"].append(np.abs(d.efc_pos[:n]) * self.coupling.scale)
-            return
-        mujoco.mj_rnePostConstraint(m, d)
-        tree = np.linalg.norm(d.cfrc_int[robot.leg_bodies, 3:], axis=1)
-        rows = 3 * self.n_loops  # equality rows come first in the constraint arrays
-        loops = np.linalg.norm(d.efc_force[:rows].reshape(-1, 3), axis=1)
-        rec["pins"].append(np.concatenate([tree, loops]))
-        rec["loops"].append(np.linalg.norm(d.efc_pos[:rows].reshape(-1, 3), axis=1))
+        rec.contact[tick, legs[legs >= 0]] = True
 
-    def _result(self, rec: dict, pid: PhasePid, p0: np.ndarray, yaw0: float) -> Walk:
-        body, mats = np.array(rec["body"]), np.array(rec["mat"]).reshape(-1, 3, 3)
-        t, phases = np.array(rec["t"]), np.array(rec["phase"])  # (T,), (T, 6)
+    def _result(self, rec: _Records, pid: PhasePid, p0: np.ndarray, yaw0: float) -> Walk:
+        body, mats = rec.body, rec.mat.reshape(-1, 3, 3)
+        t, phases = rec.t, rec.phase  # (T,), (T, 6)
         heading = np.array([math.cos(yaw0), math.sin(yaw0)])
         distance = float((body[-1, :2] - p0[:2]) @ heading)
-        yaws = np.array([_yaw(x) for x in mats.reshape(-1, 9)])
+        yaws = np.array([yaw_of(x) for x in mats.reshape(-1, 9)])
         pitch = np.degrees(np.arcsin(np.clip(-mats[:, 2, 0], -1, 1)))
         roll = np.degrees(np.arctan2(mats[:, 2, 1], mats[:, 2, 2]))
         turned = phases[-1] - self.phase0  # (6,) radians each crank turned
         turns = float(np.abs(turned).mean()) / (2 * math.pi)
         bound = 2 * float(self.robot.stroke_m.mean()) * turns
-        force, limits = np.array(rec["torque"]), np.array(rec["limits"])  # (T, 6), (T, 6, 2)
+        force, limits = rec.torque, rec.limits  # (T, 6), (T, 6, 2)
         torque = np.abs(force) / self.motor.stall_nm
         margin = 1e-3 * self.motor.stall_nm
         saturated = ((force <= limits[..., 0] + margin) | (force >= limits[..., 1] - margin)).mean(
@@ -326,20 +335,21 @@ class _Run:
         sign = 1.0 if self.gait.speed_rpm >= 0 else -1.0
         errors = pid.errors(t[:, None], phases)  # (T, 6) the clock's lead on each leg
         lag = np.degrees(np.max(sign * errors, axis=0))  # behind the clock
-        pins = np.concatenate(rec["pins"]) if self.coupling is None else self._statics(rec)
+        pins = self.robot.loads.pin_forces(rec.loads)
         percentiles = tuple(float(v) for v in np.percentile(pins, [50, 95, 99, 100]))
-        loops = np.concatenate(rec["loops"]) if rec["loops"][0].size else np.zeros(1)
-        frame_contact = float(np.mean(rec["frame"]))
+        loops = self.robot.loads.loop_errors(rec.loads)
+        loops = loops if loops.size else np.zeros(1)
+        frame_contact = float(np.mean(rec.frame))
         clearance = float(body[:, 2].min() - self.frame.height / 2)
         walk = Walk(
             distance_m=distance,
             bound_m=bound,
-            heading_drift_deg=float(np.degrees(_wrap(yaws[-1] - yaw0))),
+            heading_drift_deg=float(np.degrees(wrap_angle(yaws[-1] - yaw0))),
             body_height_m=float(body[:, 2].mean()),
             clearance_m=clearance,
             max_pitch_deg=float(np.abs(pitch).max()),
             max_roll_deg=float(np.abs(roll).max()),
-            foot_slip_mm_s=_foot_slip(np.array(rec["feet"]), np.array(rec["contact"]), t),
+            foot_slip_mm_s=foot_slip(rec.feet, rec.contact, t),
             torque_p95=float(np.percentile(torque, 95)),
             torque_max=float(torque.max()),
             saturated=saturated,
@@ -352,30 +362,15 @@ class _Run:
             trace={
                 "t": t - t[0],
                 "body": body,
-                "contact": np.array(rec["contact"]),
+                "contact": rec.contact,
                 "phase": phases,
-                "qpos": np.array(rec["qpos"]),
+                "qpos": rec.qpos,
             },
             model=self.robot.model,
             timestep=self.settings.step,
         )
         reason = break_reason(walk, lag)
         return dataclasses.replace(walk, breaks=bool(reason), reason=reason)
-
-    def _statics(self, rec: dict) -> np.ndarray:
-        """Returns every pin's force at every recorded tick, all legs (the lean model's
-        pins, from the statics of each leg's mechanism under its couplings' forces)."""
-        coupling = self.coupling
-        poses, forces = np.array(rec["poses"]), np.array(rec["pins"])  # (S, 6), (S, C)
-        pins = []
-        for statics in {id(s): s for s in coupling.statics}.values():  # legs alike: one solve
-            slots = [i for i, s in enumerate(coupling.statics) if s is statics]
-            wrench = np.concatenate(
-                [forces[:, coupling.leg == i].reshape(len(forces), -1, 3) for i in slots]
-            )  # (S * slots, K, 3): x, z, angle, in the frame's coordinates
-            wrench = wrench * np.array([-statics.leg.facing(), 1.0, 1.0])  # linkage's frame
-            pins.append(statics.pin_forces(poses[:, slots].T.ravel(), wrench).ravel())
-        return np.concatenate(pins)
 
     def _diverged(self) -> Walk:
         nan = math.nan
@@ -390,35 +385,6 @@ class _Run:
         )  # fmt: skip
 
 
-def break_reason(walk: Walk, lag_deg: np.ndarray) -> str:
-    """Returns why a walked robot breaks ("" when it does not): a stalled motor, a frame
-    that drags, or pin loads above what a LEGO pin joint holds.
-
-    Args:
-        walk: the walk's figures.
-        lag_deg: (6,) how far each leg fell behind the clock.
-    """
-    reasons = []
-    stalled = (lag_deg > STALL_LAG_DEG) & (walk.saturated >= STALL_SATURATED)
-    for i in np.flatnonzero(stalled):
-        reasons.append(
-            f"the {LEG_SLOTS[i]} motor stalls: at its torque limit for "
-            f"{walk.saturated[i]:.0%} of the walk, the leg falls {lag_deg[i]:.0f}° behind "
-            "the clock"
-        )
-    if walk.frame_contact > FRAME_DRAG_SHARE:
-        reasons.append(
-            f"the frame drags on the floor for {walk.frame_contact:.0%} of the walk: the "
-            "legs cannot carry it"
-        )
-    if walk.pin_force_n[2] > PIN_FORCE_LIMIT_N:
-        reasons.append(
-            f"pin loads reach {walk.pin_force_n[2]:.0f} N (99th percentile), above the "
-            f"{PIN_FORCE_LIMIT_N:.0f} N a LEGO Technic pin joint holds"
-        )
-    return "; ".join(reasons)
-
-
 def field_trials(
     legs: Leg | dict[str, Leg],
     floor: Floor,
@@ -430,75 +396,3 @@ def field_trials(
     """Returns `repeats` walks, repeat r perturbed by seed `seed * 1000 + r`; keyword
     arguments go to `walk`."""
     return [walk(legs, floor, seed=seed * 1000 + r, **kwargs) for r in range(repeats)]
-
-
-def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
-    """Returns the JSON-able summary of field trials: distances in cm per repeat and their
-    mean, and the builder's figures over the repeats (means, or the worst where a limit
-    matters)."""
-
-    def worst(values) -> float | None:
-        finite = [v for v in values if math.isfinite(v)]
-        return max(finite) if finite else None
-
-    def mean(values) -> float | None:
-        finite = [v for v in values if math.isfinite(v)]
-        return statistics.fmean(finite) if finite else None
-
-    distances = [w.distance_m * 100 for w in walks]
-    broken = [w.reason for w in walks if w.breaks]
-    reason = f"{broken[0]} ({len(broken)} of {len(walks)} walks break)" if broken else ""
-    return {
-        "floor": floor.name,
-        "seconds": seconds,
-        "distance_cm": [None if not math.isfinite(v) else round(v, 2) for v in distances],
-        "mean_distance_cm": None if mean(distances) is None else round(mean(distances), 2),
-        "bound_cm": None if mean(w.bound_m for w in walks) is None
-        else round(mean(w.bound_m for w in walks) * 100, 2),
-        "heading_drift_deg": [round(w.heading_drift_deg, 2) for w in walks],
-        "beyond_bound": any(w.distance_m > w.bound_m for w in walks if math.isfinite(w.distance_m)),
-        "breaks": any(w.breaks for w in walks),
-        "reason": reason,
-        "body_height_cm": _round(mean(w.body_height_m * 100 for w in walks)),
-        "min_clearance_cm": _round(-worst(-w.clearance_m * 100 for w in walks)
-                                   if worst(-w.clearance_m * 100 for w in walks) is not None
-                                   else None),
-        "max_pitch_deg": _round(worst(w.max_pitch_deg for w in walks)),
-        "max_roll_deg": _round(worst(w.max_roll_deg for w in walks)),
-        "foot_slip_mm_s": _round(mean(w.foot_slip_mm_s for w in walks)),
-        "torque_p95_of_stall": _round(worst(w.torque_p95 for w in walks), 3),
-        "torque_max_of_stall": _round(worst(w.torque_max for w in walks), 3),
-        "max_lag_deg": _round(worst(w.max_lag_deg for w in walks)),
-        "pin_force_p50_n": _round(mean(w.pin_force_n[0] for w in walks)),
-        "pin_force_p95_n": _round(mean(w.pin_force_n[1] for w in walks)),
-        "pin_force_p99_n": _round(worst(w.pin_force_n[2] for w in walks)),
-        "pin_force_max_n": _round(worst(w.pin_force_n[3] for w in walks)),
-        "loop_error_max_mm": _round(worst(w.loop_error_mm for w in walks), 3),
-        "timestep_ms": [round(w.timestep * 1000, 3) for w in walks],
-        "frame_contact_share": _round(worst(w.frame_contact for w in walks), 3),
-    }  # fmt: skip
-
-
-def _round(value: float | None, digits: int = 2) -> float | None:
-    return None if value is None else round(float(value), digits)
-
-
-def _yaw(mat: np.ndarray) -> float:
-    return math.atan2(mat[3], mat[0])
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
-def _foot_slip(feet: np.ndarray, contact: np.ndarray, t: np.ndarray) -> float:
-    """Mean horizontal foot speed (mm/s) while a foot is down: its leg touches the floor
-    and the foot is within 3 mm of the lowest height it reaches, over the feet (T, 6, 3)
-    and contacts (T, 6) sampled at times t (T,)."""
-    if len(t) < 2:
-        return math.nan
-    down = contact & (feet[:, :, 2] <= feet[:, :, 2].min(axis=0) + 0.003)
-    both = down[1:] & down[:-1]
-    dt = np.diff(t)[:, None]
-    step = np.linalg.norm(np.diff(feet[:, :, :2], axis=0), axis=2) / np.where(dt > 0, dt, np.inf)
-    return float(step[both].mean() * 1000) if both.any() else math.nan

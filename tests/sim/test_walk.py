@@ -97,7 +97,7 @@ def test_the_lean_pin_statics_balance_the_motor_as_the_physics_does(evolved):
     phases = {s: np.radians(TRIPOD_OFFSETS_DEG[s]) for s in LEG_SLOTS}
     legs = dict.fromkeys(LEG_SLOTS, evolved)
     robot = build_lean_robot(legs, phases, FLOORS["carpet"], frame=Frame(mass_kg=5.0))
-    model, coupling = robot.model, robot.coupling
+    model, coupling = robot.model, robot.loads
     data = mujoco.MjData(model)
     data.ctrl[:] = 2.6  # rad/s, about the gait's speed
     statics, facing = coupling.statics[0], evolved.facing()
