@@ -18,10 +18,11 @@ import pandas as pd
 from linkevo.orchestrator.config import ConfigError, from_dict, to_toml
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
-from linkevo.orchestrator.report.findings import Finding, best_path_sizes, check_findings
+from linkevo.orchestrator.report.findings import best_path_sizes, check_findings
 from linkevo.orchestrator.report.html import render_html
 from linkevo.orchestrator.report.load import GridData, load_grid
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
+from linkevo.orchestrator.report.verdicts import Finding
 from linkevo.workers.store.artifacts import write_bytes_atomic
 
 REPORT_ARTIFACT_DIR = "report"

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +10,21 @@ import pandas as pd
 
 from linkevo.orchestrator.report.load import GridData
 from linkevo.orchestrator.report.measures import trial_measures
-from linkevo.orchestrator.report.stats import ALPHA, a12, a12_interval, mann_whitney, pairwise_tests
+from linkevo.orchestrator.report.stats import a12, a12_interval, mann_whitney, pairwise_tests
+from linkevo.orchestrator.report.verdicts import (
+    NOT_REPRODUCED,
+    NOT_TESTABLE,
+    REPRODUCED,
+    RULE,
+    STRENGTH,
+    Finding,
+    describe,
+    judge,
+    pair_row,
+    similar,
+    versus,
+    weakest,
+)
 from linkevo.sim.study import (
     BASELINE,
     MULTI_OBJECTIVE,
@@ -21,115 +34,6 @@ from linkevo.sim.study import (
     label,
 )
 from linkevo.workers.store.artifacts import read_document
-
-REPRODUCED = "reproduced"
-DIRECTION_ONLY = "direction only"
-NOT_REPRODUCED = "not reproduced"
-CONTRADICTED = "contradicted"
-NOT_SHOWN = "not shown"
-NOT_TESTABLE = "not testable"
-STRENGTH: tuple[str, ...] = (REPRODUCED, DIRECTION_ONLY, NOT_SHOWN, NOT_REPRODUCED, CONTRADICTED)
-"""Verdicts from strongest to weakest: a claim over several pairs takes its weakest."""
-SIMILAR_A12 = 0.71
-"""A12 within [1 - 0.71, 0.71]: less than Vargha and Delaney's large effect ("similar")."""
-RULE = (
-    "A claim that X does better than Y on a per-trial measure is reproduced when A12 of X "
-    "over Y lies on the claimed side of 0.5, its 95 % bootstrap interval excludes 0.5 and "
-    f"the Holm-corrected two-sided Mann–Whitney p < {ALPHA}; direction only when A12 is on "
-    "the claimed side without both; contradicted when the reverse holds with both; "
-    "otherwise not reproduced. A claim of similarity is reproduced when every pair's A12 "
-    f"interval lies within [{1 - SIMILAR_A12:.2f}, {SIMILAR_A12}] (less than a large effect), "
-    "not reproduced when a pair differs by the first rule, and otherwise not shown (the "
-    "intervals are too wide at this number of trials). A claim over several pairs takes "
-    "its weakest pair's verdict."
-)
-"""The one rule every verdict of the report follows (docs/results.md states it too)."""
-
-
-@dataclass(frozen=True)
-class Finding:
-    """One claim of the study and what this grid says about it.
-
-    Attributes:
-        claim: the study's claim, in words.
-        rule: the test applied to this grid.
-        verdict: one of `STRENGTH` by `RULE`, or NOT_TESTABLE; "not judged: a pipeline
-            check ..." for a grid below the study's budget.
-        evidence: the numbers behind the verdict.
-    """
-
-    claim: str
-    rule: str
-    verdict: str
-    evidence: str
-
-
-def _pair(tests: pd.DataFrame, fitness: str, a: str, b: str) -> pd.Series | None:
-    """Returns the test row comparing approaches a and b under `fitness`, a first."""
-    rows = tests[(tests.fitness == fitness)]
-    hit = rows[(rows.approach_a == a) & (rows.approach_b == b)]
-    if len(hit):
-        return hit.iloc[0]
-    hit = rows[(rows.approach_a == b) & (rows.approach_b == a)]
-    if not len(hit):
-        return None
-    row = hit.iloc[0].copy()
-    row["approach_a"], row["approach_b"] = a, b
-    row["median_a"], row["median_b"] = row.median_b, row.median_a
-    row["a12"] = 1.0 - row.a12
-    row["a12_low"], row["a12_high"] = 1.0 - row.a12_high, 1.0 - row.a12_low
-    return row
-
-
-def _describe(row: pd.Series, what: str = "median") -> str:
-    return (
-        f"{label(row.approach_a)} {what} {row.median_a:.4g} vs {label(row.approach_b)} "
-        f"{row.median_b:.4g} (A12 {row.a12:.2f} [{row.a12_low:.2f}, {row.a12_high:.2f}], "
-        f"Holm p {row.p_holm:.3g})"
-    )
-
-
-def judge(row: pd.Series, lower: bool = True) -> str:
-    """Returns the verdict (`RULE`) on "approach_a does better than approach_b" from a
-    test row: better is a lower measure when `lower`, else a higher one."""
-    side = (lambda a: a < 0.5) if lower else (lambda a: a > 0.5)
-    significant = bool(row.p_holm < ALPHA)
-    if significant and side(row.a12) and side(row.a12_high if lower else row.a12_low):
-        return REPRODUCED
-    if significant and not side(row.a12) and not side(row.a12_low if lower else row.a12_high):
-        return CONTRADICTED if row.a12 != 0.5 else NOT_REPRODUCED
-    return DIRECTION_ONLY if side(row.a12) else NOT_REPRODUCED
-
-
-def similar(row: pd.Series) -> str:
-    """Returns the verdict (`RULE`) on "approach_a and approach_b perform alike"."""
-    if bool(row.p_holm < ALPHA) and not (row.a12_low <= 0.5 <= row.a12_high):
-        return NOT_REPRODUCED
-    inside = row.a12_low >= 1.0 - SIMILAR_A12 and row.a12_high <= SIMILAR_A12
-    return REPRODUCED if inside else NOT_SHOWN
-
-
-def weakest(verdicts: list[str]) -> str:
-    """Returns the weakest of several pairs' verdicts (`STRENGTH`)."""
-    return max(verdicts, key=STRENGTH.index)
-
-
-def _versus(
-    tests: pd.DataFrame,
-    claim: str,
-    rule: str,
-    fitness: str,
-    pairs: list[tuple[str, str]],
-    lower: bool = True,
-    what: str = "median",
-) -> Finding:
-    """Returns the finding "in each pair (x, y), x does better than y" under `fitness`."""
-    rows = [r for r in (_pair(tests, fitness, x, y) for x, y in pairs) if r is not None]
-    if not rows:
-        return Finding(claim, rule, NOT_TESTABLE, f"no finished pair of trials with {fitness}")
-    verdicts = [judge(r, lower) for r in rows]
-    evidence = "; ".join(f"{_describe(r, what)}: {v}" for r, v in zip(rows, verdicts, strict=True))
-    return Finding(claim, rule, weakest(verdicts), evidence)
 
 
 def best_path_sizes(grid: GridData) -> pd.DataFrame:
@@ -172,14 +76,14 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
     mine = measures[measures.approach != BASELINE]
     best = f"lower median best loss; {RULE}"
     findings = [
-        _versus(
+        versus(
             study,
             "With F_p, the MAP-Elites approaches beat the EA (Results).",
             best,
             "Fp",
             [(m, "EA") for m in maps],
         ),
-        _versus(
+        versus(
             study,
             "With F_p, the MAP-Elites approaches slightly beat NSGA-II (Results).",
             best,
@@ -188,7 +92,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         ),
         _alike(study, "Fsl"),
         _oversized(grid),
-        _versus(
+        versus(
             study,
             "All the tested approaches except the standard EA find linkages whose path is "
             "similar to the desired one; the quality-diversity and multi-objective "
@@ -197,7 +101,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
             "Fp",
             [(a, "EA") for a in searches if a != "EA"],
         ),
-        _versus(
+        versus(
             pairwise_tests(mine, "stagnation", higher_is_better=True),
             "With F_p, the EA converged to a local optimum (Discussion).",
             "a larger median share of the budget spent after the last improvement of the "
@@ -212,7 +116,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
     diversity = pairwise_tests(mine, "path_diversity", higher_is_better=True)
     for approach, fitness in (("MAP-WH", "Fsl"), ("MAP-AU", "Fp")):
         findings.append(
-            _versus(
+            versus(
                 diversity,
                 f"With {label(fitness)}, {approach} created the most diverse paths (Results).",
                 "a higher median path diversity (`sim.path_diversity`) than every other "
@@ -227,7 +131,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
     for fitness in grid.fitnesses():
         findings.append(_filled_differently(coverage, maps, fitness))
         findings.append(
-            _versus(
+            versus(
                 coverage,
                 f"With {label(fitness)}, MAP-ST's structural dimensions were hard to fill "
                 "(Discussion).",
@@ -238,7 +142,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
             )
         )
         findings.append(
-            _versus(
+            versus(
                 pairwise_tests(mine, "descriptor_correlation", higher_is_better=True),
                 f"With {label(fitness)}, MAP-WH's dimensions are correlated with the "
                 "fitness (Results, prototyping).",
@@ -278,7 +182,7 @@ def _alike(study: pd.DataFrame, fitness: str) -> Finding:
         r for r, v in zip(rows.itertuples(index=False), verdicts, strict=True) if v != REPRODUCED
     ]
     evidence = ", ".join(f"{n} pairs {v}" for v, n in counts.items()) + (
-        "; " + "; ".join(_describe(pd.Series(r._asdict())) for r in shown[:6]) if shown else ""
+        "; " + "; ".join(describe(pd.Series(r._asdict())) for r in shown[:6]) if shown else ""
     )
     return Finding(claim, rule, weakest(verdicts), evidence)
 
@@ -292,13 +196,13 @@ def _filled_differently(coverage: pd.DataFrame, maps: list[str], fitness: str) -
     )
     rule = f"every pair of maps differs in median coverage of its own grid; {RULE}"
     pairs = [(a, b) for i, a in enumerate(maps) for b in maps[i + 1 :]]
-    rows = [r for r in (_pair(coverage, fitness, a, b) for a, b in pairs) if r is not None]
+    rows = [r for r in (pair_row(coverage, fitness, a, b) for a, b in pairs) if r is not None]
     if not rows:
         return Finding(claim, rule, NOT_TESTABLE, f"no two maps finished with {fitness}")
     verdicts = [
         REPRODUCED if judge(r, lower=r.a12 < 0.5) == REPRODUCED else NOT_REPRODUCED for r in rows
     ]
-    evidence = "; ".join(_describe(r, "median coverage") for r in rows)
+    evidence = "; ".join(describe(r, "median coverage") for r in rows)
     return Finding(claim, rule, weakest(verdicts), evidence)
 
 
@@ -355,7 +259,7 @@ def _two_samples(
          "p_holm": p}
     )  # fmt: skip
     verdict = judge(row, lower)
-    evidence = f"{_describe(row, f'median {column}')}, {x.size} and {y.size} trials"
+    evidence = f"{describe(row, f'median {column}')}, {x.size} and {y.size} trials"
     return Finding(claim, rule, verdict, evidence)
 
 
@@ -384,7 +288,7 @@ def _against_random(
     out = []
     for fitness in grid.fitnesses():
         out.append(
-            _versus(
+            versus(
                 baseline,
                 f"With {label(fitness)}, every search beats random sampling (not in the study).",
                 f"lower median best loss than RANDOM at the same budget (baseline family); {RULE}",
@@ -393,7 +297,7 @@ def _against_random(
             )
         )
         out.append(
-            _versus(
+            versus(
                 common[common.family == "baseline"],
                 f"With {label(fitness)}, MAP-LIS fills the MAP-LIS grid better than random "
                 "sampling (not in the study).",

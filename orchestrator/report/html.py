@@ -8,7 +8,7 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from linkevo.orchestrator.report.findings import REPRODUCED, Finding
+from linkevo.orchestrator.report.verdicts import REPRODUCED, Finding
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG
 from linkevo.sim.study import STUDY_EVALUATIONS
 

@@ -19,14 +19,10 @@ from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.report import build_report, load_grid
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import checks_summary
-from linkevo.orchestrator.report.findings import (
-    NOT_SHOWN,
-    NOT_TESTABLE,
-    REPRODUCED,
-    check_findings,
-)
+from linkevo.orchestrator.report.findings import check_findings
 from linkevo.orchestrator.report.html import table_html
 from linkevo.orchestrator.report.stats import holm, pairwise_tests
+from linkevo.orchestrator.report.verdicts import NOT_SHOWN, NOT_TESTABLE, REPRODUCED
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.physical import physical_checks

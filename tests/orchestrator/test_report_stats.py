@@ -7,7 +7,15 @@ import pandas as pd
 import pytest
 from scipy.stats import mannwhitneyu
 
-from linkevo.orchestrator.report.findings import (
+from linkevo.orchestrator.report.html import context
+from linkevo.orchestrator.report.stats import (
+    a12,
+    a12_interval,
+    mann_whitney,
+    pairwise_tests,
+    summary_table,
+)
+from linkevo.orchestrator.report.verdicts import (
     CONTRADICTED,
     DIRECTION_ONLY,
     NOT_REPRODUCED,
@@ -16,14 +24,6 @@ from linkevo.orchestrator.report.findings import (
     judge,
     similar,
     weakest,
-)
-from linkevo.orchestrator.report.html import context
-from linkevo.orchestrator.report.stats import (
-    a12,
-    a12_interval,
-    mann_whitney,
-    pairwise_tests,
-    summary_table,
 )
 
 
