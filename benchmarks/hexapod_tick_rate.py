@@ -2,7 +2,7 @@
 
 Measures, with the real dynamixel-sdk talking to `hardware.emulator.BusEmulator` on a pty:
 
-1. a clocked walk (`run_walk`, `--simulate` path) of `--seconds` at the config's rate:
+1. a clocked walk (`run_walk`, `--emulate` path) of `--seconds` at the config's rate:
    ticks, achieved rate, skipped slots and missed reads;
 2. the loop's ceiling: back-to-back ticks (one sync read of the 21-byte state block and
    one sync write of Goal Velocity for all six motors), per second;

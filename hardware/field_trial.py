@@ -20,13 +20,12 @@ import numpy as np
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.session import run_walk
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.study import MAP_ELITES
+from linkevo.sim.study import MAP_ELITES, ROBOTS
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.linkages import SourceLinkage
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment
 
-ROBOTS = ("first", "modified")
 REAL, EMULATOR, PHYSICS = "False", "True", "physics"
 """The values of a field trial's `simulated` param."""
 """Row order of the study's Table I; other approaches follow alphabetically."""
@@ -109,7 +108,7 @@ def log_field_trial(
         client.log_metric(run_id, "mean_distance_cm", statistics.fmean(distances))
     for name, value in (metrics or {}).items():
         client.log_metric(run_id, name, value)
-    client.log_dict(run_id, source.document, "linkage.json")
+    client.log_dict(run_id, source.document, layout.LINKAGE_JSON)
     for name, document in (artifacts or {}).items():
         client.log_dict(run_id, document, name)
     for path in telemetry:

@@ -1,6 +1,6 @@
 """Provides `PhysicsWorld`: the bus emulator's motors as the cranks of the simulated robot.
 
-`linkevo hexapod walk --simulate physics` runs the real driver stack (dynamixel-sdk on the
+`linkevo hexapod walk --emulate physics` runs the real driver stack (dynamixel-sdk on the
 pseudo-terminal, the gait's PID, the safety monitor) against `hardware.emulator.BusEmulator`
 whose motors are `PhysicsMotor`s: what the driver writes (torque, operating mode, Goal
 Velocity or Goal Position) drives the crank of the motor's leg in MuJoCo (the lean robot

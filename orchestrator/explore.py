@@ -36,13 +36,13 @@ from linkevo.sim import decode, simulate
 from linkevo.sim.decoding import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from linkevo.sim.robot import in_floor_order
 from linkevo.sim.study import FITNESSES, ordered
+from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
 from linkevo.workers.store.runs import RunStore, TrialRun
 from linkevo.workers.store.tables import bin_columns, space_of
 
-PAGE_ARTIFACT = "explorer.html"
-"""The page's name among a run's artefacts (a trial's run, or a grid's parent run)."""
 GRID_DRAWN = 500
 """Cells per trial whose linkage a grid page draws by default (the lowest-loss ones)."""
 TEMPLATE = "explorer_page.html"
@@ -157,7 +157,7 @@ def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str]
     if walks is None or walks.empty:
         return [], {}
     walks = walks[walks["status"] == "walked"]
-    floors = sorted(walks["floor"].unique(), key=lambda f: (f != "flat", f))
+    floors = in_floor_order(walks["floor"].unique())
     walked = {
         (int(cell), str(floor)): [round(float(d), 1), int(bool(b)), str(r)]
         for cell, floor, d, b, r in zip(
@@ -247,6 +247,8 @@ def explore(
                 progress(done, trial)
         write_bytes_atomic(out, render_page(title, views).encode("utf-8"))
         if log_to is not None:
-            named = shutil.copyfile(out, Path(tmp) / PAGE_ARTIFACT)  # the name it is logged as
+            named = shutil.copyfile(
+                out, Path(tmp) / layout.EXPLORER_HTML
+            )  # the name it is logged as
             store.client.log_artifact(log_to, str(named))
     return out

@@ -12,9 +12,11 @@ import numpy as np
 
 from linkevo.sim.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.physical import TOGGLE_DEG
+from linkevo.sim.robot import in_floor_order
 from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
+from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_json_atomic, write_text_atomic
 from linkevo.workers.store.linkages import SourceLinkage
 from linkevo.workers.store.runs import RunStore
@@ -211,7 +213,8 @@ def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
     if walks is None:
         return {}
     rows = walks[(walks["cell"] == source.cell) & (walks["status"] == "walked")]
-    rows = rows.sort_values("floor", key=lambda f: f != "flat", kind="stable")
+    order = in_floor_order(rows["floor"])
+    rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")
     return {
         str(r.floor): {
             "distance_cm": round(float(r.mean_distance_cm), 1),
@@ -264,7 +267,7 @@ def pull(
     writer = csv.DictWriter(table, fieldnames=SHEET_COLUMNS, lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    paths = [out / name for name in ("linkage.json", "build_sheet.md", "build_sheet.csv")]
+    paths = [out / name for name in (layout.LINKAGE_JSON, "build_sheet.md", "build_sheet.csv")]
     write_json_atomic(paths[0], doc)
     write_text_atomic(paths[1], sheet_markdown(source, doc, rows))
     write_text_atomic(paths[2], table.getvalue())

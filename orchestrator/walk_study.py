@@ -25,9 +25,9 @@ import numpy as np
 import pandas as pd
 
 from linkevo.hardware.config import RobotConfig
-from linkevo.orchestrator.simulate import log_simulated, simulate_source
+from linkevo.orchestrator.simulated_trials import log_simulated, simulate_source
 from linkevo.sim.linkage_doc import to_document
-from linkevo.sim.robot import FLOORS
+from linkevo.sim.robot import FLAT, FLOORS
 from linkevo.sim.study import MAP_ELITES
 from linkevo.workers.plots.repertoire import select_paths
 from linkevo.workers.store import run_layout as layout
@@ -100,7 +100,7 @@ def choose_robots(
                 grid_id=first.grid_id,
             )
             result, _ = simulate_source(
-                source, "flat", config=config, seconds=seconds, repeats=repeats, model=model
+                source, FLAT, config=config, seconds=seconds, repeats=repeats, model=model
             )
             distance = result["mean_distance_cm"]
             scored.append(

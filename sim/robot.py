@@ -13,6 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+ROBOT_MODELS: tuple[str, ...] = ("lean", "full")
+"""The MuJoCo models of the robot a walk can run on (`sim.walking.MODELS`): lean, the
+default, and full."""
 WALK_SECONDS = 10.0
 """How long a walk lasts unless told: Table I's 10 s."""
 LEG_SLOTS = ("left-front", "left-middle", "left-rear", "right-front", "right-middle", "right-rear")
@@ -106,22 +109,30 @@ class Floor:
     summary: str
 
 
+FLAT, CARPET = "flat", "carpet"
+"""The floors' names: the paper's "flat and slightly slippery" floor and its thick carpet."""
 FLOORS = {
-    "flat": Floor(
-        "flat",
+    FLAT: Floor(
+        FLAT,
         friction=0.35,
         solref=(0.004, 1.0),
         solimp=(0.95, 0.99, 0.001),
         summary="flat and slightly slippery: plastic on a smooth floor, stiff contact",
     ),
-    "carpet": Floor(
-        "carpet",
+    CARPET: Floor(
+        CARPET,
         friction=0.9,
         solref=(0.02, 1.0),
         solimp=(0.5, 0.9, 0.006),
         summary="a thick carpet: high friction, feet sink a few millimetres",
     ),
 }
+
+
+def in_floor_order(names) -> list[str]:
+    """Returns floor names in `FLOORS`' order (flat first), unknown names last, sorted."""
+    names = set(names)
+    return [f for f in FLOORS if f in names] + sorted(names - set(FLOORS))
 
 
 def floor(name: str) -> Floor:

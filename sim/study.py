@@ -98,6 +98,11 @@ MIN_ANGLES = 3
 """The fewest crank angles a trial accepts: a path needs three points to have a shape."""
 
 
+ROBOTS: tuple[str, ...] = ("first", "modified")
+"""Table I's robots of an approach: the first, built from a region of its map, and the
+modified one, from a neighbouring region."""
+
+
 def label(name: str) -> str:
     """Returns the figure label of an approach or fitness name ("NSGA2" -> "NSGA-II")."""
     item = APPROACH.get(name) or FITNESS.get(name)

@@ -24,11 +24,21 @@ from linkevo.sim.full_model import TIMESTEP_S, build_robot
 from linkevo.sim.gait import GaitConfig, PhasePid
 from linkevo.sim.lean_model import LEAN_TIMESTEP_S, build_lean_robot
 from linkevo.sim.leg import Leg
-from linkevo.sim.robot import LEG_SLOTS, TRIPOD_OFFSETS_DEG, WALK_SECONDS, Floor, Frame, Motor
+from linkevo.sim.robot import (
+    LEG_SLOTS,
+    ROBOT_MODELS,
+    TRIPOD_OFFSETS_DEG,
+    WALK_SECONDS,
+    Floor,
+    Frame,
+    Motor,
+)
 from linkevo.sim.robot_model import RobotModel, control_tick
 from linkevo.sim.walk_figures import break_reason, foot_slip, wrap_angle, yaw_of
 
-MODELS = {"lean": (build_lean_robot, LEAN_TIMESTEP_S), "full": (build_robot, TIMESTEP_S)}
+MODELS = dict(
+    zip(ROBOT_MODELS, ((build_lean_robot, LEAN_TIMESTEP_S), (build_robot, TIMESTEP_S)), strict=True)
+)
 """The robot models a walk can run on, with their default physics steps: `lean` (each leg
 reduced to the parts that meet the floor, `sim.lean_model`; the default) and `full` (every
 beam a body, `sim.full_model`; for pictures and cross-checks)."""

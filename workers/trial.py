@@ -17,6 +17,7 @@ from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.path_diversity import path_diversity
 from linkevo.sim.physical import physical_checks
+from linkevo.sim.robot import FLAT
 from linkevo.sim.study import (
     REPERTOIRE_APPROACHES,
 )
@@ -183,7 +184,7 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
     order = np.lexsort((cells, loss))
     keep = order[physical_checks(batch, simulate(batch, spec.n_angles)).buildable[order]]
     keep = keep[: spec.walk_rerank]
-    rows = walk_cells(CellBatch(cells[keep], genomes[keep], spec.mode, ("flat",)))
+    rows = walk_cells(CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,)))
     distance = np.array([r["mean_distance_cm"] for r in rows], dtype=float)
     sound = np.array([r["status"] == "walked" and not r["breaks"] for r in rows], dtype=bool)
     columns = {c: np.array([r[c] for r in rows]) for c in COLUMNS}

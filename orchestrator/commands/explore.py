@@ -51,7 +51,8 @@ def handle(args: argparse.Namespace) -> int:
     import os
     import sys
 
-    from linkevo.orchestrator.explore import GRID_DRAWN, PAGE_ARTIFACT, explore
+    from linkevo.orchestrator.explore import GRID_DRAWN, explore
+    from linkevo.workers.store import run_layout as layout
     from linkevo.workers.store.runs import RunStore
 
     if args.drawn is not None and args.drawn < 1:
@@ -79,5 +80,5 @@ def handle(args: argparse.Namespace) -> int:
     explore(store, trials, out, title=title, drawn=drawn, log_to=log_to, progress=progress)
     print(out)
     if log_to is not None:
-        print(f"logged as {PAGE_ARTIFACT} to run {log_to}")
+        print(f"logged as {layout.EXPLORER_HTML} to run {log_to}")
     return 0

@@ -13,13 +13,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 
 if TYPE_CHECKING:
     from linkevo.hardware.config import RobotConfig
-
-DEFAULT_CONFIG = "configs/hexapod.toml"
-"""The robot config when `--config` is not given: the one linkevo ships (`linkevo.configs`)."""
-_TRACKING_HELP = "MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)"
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -32,33 +29,49 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Drives the study's hexapod (six Dynamixel MX-28AT, Protocol 2.0).",
     )
     sub = parser.add_subparsers(dest="hexapod_command", required=True, metavar="ACTION")
+    _register_walk(sub)
+    _register_trial(sub)
+    hexapod_simulate.register(sub)
+    _register_table(sub)
 
+
+def _register_walk(sub: argparse._SubParsersAction) -> None:
     walk = sub.add_parser("walk", help="walk for a fixed time with the phase-locked tripod gait")
-    config_option(walk)
+    options.robot_config(walk)
     walk.add_argument(
-        "--simulate",
+        "--emulate",
         nargs="?",
         const="bus",
         default=None,
+        choices=EMULATORS,
         help="run against the built-in bus emulator on a pty: 'bus' (the default when given; "
         "the motors turn as commanded) or 'physics' (the motors are the cranks of the robot "
         "simulated in MuJoCo, walking --linkage on --floor, in real time)",
     )
     walk.add_argument(
-        "--linkage", default=None, help="with --simulate physics: RUN_ID[:CELL] or FILE.json"
+        "--linkage", default=None, help="with --emulate physics: RUN_ID[:CELL] or FILE.json"
     )
-    walk.add_argument("--floor", default="flat", help="with --simulate physics: flat or carpet")
-    walk.add_argument("--seconds", type=float, required=True, help="walking time in seconds")
+    options.floor(walk)
+    walk.add_argument(
+        "--seconds", type=positive_seconds, required=True, help="walking time in seconds"
+    )
     walk.add_argument("--telemetry", type=Path, default=None, help="CSV file, one row per tick")
     walk.set_defaults(func=walk_handler)
 
+
+def _register_trial(sub: argparse._SubParsersAction) -> None:
     trial = sub.add_parser("trial", help="walk an evolved linkage's robot and log the distances")
-    _robot_options(trial)
+    options.robot_config(trial)
+    trial.add_argument(
+        "--emulate", action="store_true", help="run against the built-in bus emulator on a pty"
+    )
     trial.add_argument("--linkage", required=True, help="source trial run: RUN_ID or RUN_ID:CELL")
-    trial.add_argument("--floor", required=True, help="floor name, e.g. flat or carpet")
-    trial.add_argument("--robot", default="first", help="first or modified")
-    trial.add_argument("--repeats", type=int, default=5, help="walks on this floor")
-    trial.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
+    trial.add_argument("--floor", required=True, type=floor_name, help="the floor's name")
+    options.robot(trial)
+    options.repeats(trial)
+    trial.add_argument(
+        "--seconds", type=positive_seconds, default=options.WALK_SECONDS, help="seconds per walk"
+    )
     trial.add_argument(
         "--distance-cm",
         type=float,
@@ -67,107 +80,50 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="D",
         help="measured distances, one per repeat (default: asked on stdin after each walk)",
     )
-    trial.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
+    options.store(trial)
     trial.set_defaults(func=trial_handler)
 
-    simulate = sub.add_parser(
-        "simulate",
-        help="walk a linkage's robot in 3-D physics (MuJoCo): Table I's protocol, predicted",
-        description=(
-            "Walks the study's hexapod with six copies of the linkage (its LEGO build) in "
-            "MuJoCo, with the gait of the robot config, and reports the distance walked along "
-            "the starting heading per repeat, whether the robot breaks and why, and what a "
-            "builder needs to trust the number (docs/walking.md). Logged as a field trial "
-            "marked simulated, so `linkevo hexapod table` shows it beside the real ones."
-        ),
-    )
-    simulate.add_argument(
-        "--linkage", required=True, help="RUN_ID, RUN_ID:CELL or a linkage document FILE.json"
-    )
-    simulate.add_argument("--floor", required=True, help="flat or carpet")
-    simulate.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
-    simulate.add_argument("--repeats", type=int, default=5, help="walks on this floor")
-    simulate.add_argument("--robot", default="first", help="first or modified (the table's row)")
-    simulate.add_argument(
-        "--model",
-        default="lean",
-        help="lean (legs reduced to what meets the floor; the default) or full (every beam a "
-        "body; slower, for pictures)",
-    )
-    simulate.add_argument("--seed", type=int, default=0, help="seeds the start's perturbation")
-    simulate.add_argument("--json", action="store_true", help="print one JSON object")
-    simulate.add_argument(
-        "--out",
-        type=Path,
-        default=None,
-        help="write the first walk's pictures here (walk.gif, walk.png, path.png, contacts.png)",
-    )
-    simulate.add_argument("--no-log", action="store_true", help="do not log to MLflow")
-    config_option(simulate)
-    simulate.add_argument("--experiment", default="linkevo", help="experiment for a FILE.json")
-    simulate.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
-    simulate.set_defaults(func=hexapod_simulate.simulate_handler)
 
-    study = sub.add_parser(
-        "study",
-        help="repeat the study's prototyping (Table I) on the simulated robot for a grid",
-        description=(
-            "For each MAP-Elites approach with F_p: the first robot (the best linkage of the "
-            "approach's best trial) and a modified robot chosen from its 5 × 5 downsampled "
-            "map, each walked on both floors in 3-D physics and logged as simulated field "
-            "trials (docs/walking.md)."
-        ),
-    )
-    study.add_argument("grid_id", help="the grid (its id, as `linkevo report` shows it)")
-    study.add_argument("--seconds", type=float, default=10.0, help="seconds per walk")
-    study.add_argument("--repeats", type=int, default=5, help="walks per robot and floor")
-    study.add_argument("--out", type=Path, default=None, help="write the table here as CSV")
-    study.add_argument("--model", default="lean", help="lean (the default) or full")
-    config_option(study)
-    study.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
-    study.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
-    study.set_defaults(func=hexapod_simulate.study_handler)
-
+def _register_table(sub: argparse._SubParsersAction) -> None:
     table = sub.add_parser("table", help="print mean distances as in the study's Table I")
-    table.add_argument("--tracking-uri", default=None, help=_TRACKING_HELP)
-    table.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
+    options.store(table)
     table.add_argument(
-        "--simulated",
+        "--emulated",
         action="store_true",
-        help="show the emulator's dry runs (walked with --simulate) instead of the real trials",
+        help="show the emulator's dry runs (walked with --emulate) instead of the real trials",
     )
     table.set_defaults(func=table_handler)
 
 
-def config_option(parser: argparse.ArgumentParser) -> None:
-    """Adds `--config`: the robot's TOML (default: the one linkevo ships)."""
-    parser.add_argument(
-        "--config",
-        type=Path,
-        default=None,
-        help=f"robot TOML (default: the shipped {DEFAULT_CONFIG})",
-    )
+EMULATORS = ("bus", "physics")
+"""What `hexapod walk --emulate` runs against: the bus emulator's motors alone, or as the
+cranks of the robot simulated in MuJoCo."""
 
 
-def _robot_options(parser: argparse.ArgumentParser) -> None:
-    config_option(parser)
-    parser.add_argument(
-        "--simulate", action="store_true", help="run against the built-in bus emulator on a pty"
-    )
+def positive_seconds(text: str) -> float:
+    """Returns a real walk's length in seconds, a finite number > 0."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not allowed: a positive number of seconds")
+    return value
+
+
+def floor_name(text: str) -> str:
+    """Returns a real floor's name (free text: a robot walks on any floor), not empty."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("'' is not allowed: a non-empty floor name")
+    return text
 
 
 def load_robot(args: argparse.Namespace) -> RobotConfig:
-    from linkevo.hardware.config import load_config
-    from linkevo.hardware.errors import ConfigError
-
-    if not math.isfinite(args.seconds) or args.seconds <= 0:
-        raise CliError(f"--seconds {args.seconds}: allowed a positive number of seconds")
+    """Returns the robot config `--config` names (default: the shipped one)."""
     from linkevo.configs import shipped
+    from linkevo.hardware.config import load_config
 
-    try:
-        return load_config(args.config or shipped("hexapod.toml"))
-    except ConfigError as exc:
-        raise CliError(str(exc)) from exc
+    return load_config(args.config or shipped("hexapod.toml"))
 
 
 def _exit_code(signal_name: str) -> int:
@@ -206,7 +162,7 @@ def walk_handler(args: argparse.Namespace) -> int:
             config,
             args.seconds,
             telemetry=args.telemetry,
-            simulate=args.simulate is not None,
+            simulate=args.emulate is not None,
             physics=physics,
         )
     except ShutdownIncomplete as exc:
@@ -238,35 +194,29 @@ def walk_handler(args: argparse.Namespace) -> int:
 
 
 def _physics_world(args: argparse.Namespace, config):
-    """Returns the simulated robot `--simulate physics` drives, or None for the plain
+    """Returns the simulated robot `--emulate physics` drives, or None for the plain
     emulator or the real robot.
 
     Raises:
-        CliError: a bad --simulate, --floor or --linkage, before anything starts.
+        CliError: a --linkage without --emulate physics, or none with it.
+        LinkevoError: a linkage that cannot be walked, before anything starts.
     """
-    if args.simulate not in (None, "bus", "physics"):
-        raise CliError(f"--simulate {args.simulate!r}: allowed bus, physics")
-    if args.simulate != "physics":
+    if args.emulate != "physics":
         if args.linkage is not None:
-            raise CliError("--linkage is used with --simulate physics only")
+            raise CliError("--linkage is used with --emulate physics only")
         return None
     from linkevo.hardware.physics_bus import PhysicsWorld
     from linkevo.orchestrator.commands.hexapod_simulate import simulation_source
-    from linkevo.sim.leg import LegError, leg_from_genome
+    from linkevo.sim.leg import leg_from_genome
     from linkevo.sim.linkage_doc import from_document
     from linkevo.sim.robot import FLOORS
 
-    if args.floor not in FLOORS:
-        raise CliError(f"--floor {args.floor!r}: allowed {', '.join(FLOORS)}")
     if args.linkage is None:
-        raise CliError("--simulate physics needs --linkage RUN_ID[:CELL] or FILE.json")
-    args.no_log, args.experiment, args.tracking_uri = True, "linkevo", None
+        raise CliError("--emulate physics needs --linkage RUN_ID[:CELL] or FILE.json")
+    args.no_log, args.experiment, args.tracking_uri = True, options.DEFAULT_EXPERIMENT, None
     _, source = simulation_source(args)
-    try:
-        leg = leg_from_genome(*from_document(source.document))
-        return PhysicsWorld(config, leg, FLOORS[args.floor])
-    except (LegError, ValueError) as exc:
-        raise CliError(str(exc)) from exc
+    leg = leg_from_genome(*from_document(source.document))
+    return PhysicsWorld(config, leg, FLOORS[args.floor])
 
 
 def _ask_distance(repeat: int) -> float:
@@ -288,17 +238,11 @@ def _ask_distance(repeat: int) -> float:
 def trial_handler(args: argparse.Namespace) -> int:
     """Walks the repeats, records the distances and logs a field-trial MLflow run."""
     from linkevo.hardware.errors import HardwareError, StopRequested
-    from linkevo.hardware.field_trial import ROBOTS, log_field_trial, walk_repeats
+    from linkevo.hardware.field_trial import log_field_trial, walk_repeats
     from linkevo.workers.store.linkages import LinkageRef, load_source
     from linkevo.workers.store.runs import RunStore
     from linkevo.workers.store.tracking import resolve_tracking_uri
 
-    if args.robot not in ROBOTS:
-        raise CliError(f"--robot {args.robot!r}: allowed {', '.join(ROBOTS)}")
-    if args.repeats < 1:
-        raise CliError(f"--repeats {args.repeats}: allowed an integer >= 1")
-    if not args.floor.strip():
-        raise CliError("--floor '': allowed a non-empty floor name")
     distances = args.distance_cm
     if distances is not None:
         if len(distances) != args.repeats:
@@ -325,7 +269,7 @@ def trial_handler(args: argparse.Namespace) -> int:
                 seconds=args.seconds,
                 measure=measure,
                 telemetry_dir=Path(tmp),
-                simulate=args.simulate,
+                simulate=args.emulate,
             )
         except StopRequested as exc:
             print(f"linkevo hexapod trial: {exc}; nothing logged", file=sys.stderr)
@@ -336,8 +280,8 @@ def trial_handler(args: argparse.Namespace) -> int:
         params = {
             "seconds": str(args.seconds),
             "repeats": str(args.repeats),
-            "config": str(args.config or DEFAULT_CONFIG),
-            "simulated": str(args.simulate),
+            "config": str(args.config or options.ROBOT_CONFIG),
+            "simulated": str(args.emulate),  # the stored param's name (docs/hardware.md)
         }
         run_id = log_field_trial(
             uri,
@@ -358,14 +302,11 @@ def trial_handler(args: argparse.Namespace) -> int:
 
 def table_handler(args: argparse.Namespace) -> int:
     """Prints the field-trial means in the study's Table I layout."""
-    from linkevo.hardware.field_trial import FieldTrialError, trial_table
+    from linkevo.hardware.field_trial import trial_table
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
-    try:
-        table = trial_table(uri, args.experiment, simulated=args.simulated)
-    except FieldTrialError as exc:
-        raise CliError(str(exc)) from exc
+    table = trial_table(uri, args.experiment, simulated=args.emulated)
     kind = "emulator dry-run" if table.simulated else "real"
     other = "real" if table.simulated else "emulator dry-run"
     if not table.means and not table.predicted:
@@ -375,6 +316,6 @@ def table_handler(args: argparse.Namespace) -> int:
     else:
         print(f"{kind.capitalize()} field trials:\n{table.format()}")
     if table.left_out:
-        hint = "" if table.simulated else " (--simulated shows them)"
+        hint = "" if table.simulated else " (--emulated shows them)"
         print(f"{table.left_out} {other} field-trial run(s) left out{hint}")
     return 0

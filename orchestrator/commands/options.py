@@ -15,11 +15,14 @@ import shlex
 import sys
 from pathlib import Path
 
-from linkevo.sim.robot import FLOORS, WALK_SECONDS
+from linkevo.sim.robot import FLAT, FLOORS, ROBOT_MODELS, WALK_SECONDS
+from linkevo.sim.study import ROBOTS
 from linkevo.workers.store.tracking import DEFAULT_EXPERIMENT
 
 MAX_SECONDS = 600.0
 """The longest walk a command takes (ten minutes of simulated walking)."""
+MAX_REPEATS = 100
+"""The most walks per robot and floor a command takes."""
 ROBOT_CONFIG = "configs/hexapod.toml"
 """The robot config when `--config` is not given: the one linkevo ships (`linkevo.configs`)."""
 
@@ -59,12 +62,56 @@ def walk_seconds(text: str) -> float:
     return value
 
 
-def seconds(parser: argparse.ArgumentParser, what: str = "seconds per walk") -> None:
+def seconds(
+    parser: argparse.ArgumentParser, what: str = "seconds per walk", *, required: bool = False
+) -> None:
     """Adds `--seconds`: a walk's length (default: Table I's 10 s)."""
-    parser.add_argument("--seconds", type=walk_seconds, default=WALK_SECONDS, help=what)
+    if required:
+        parser.add_argument("--seconds", type=walk_seconds, required=True, help=what)
+    else:
+        parser.add_argument("--seconds", type=walk_seconds, default=WALK_SECONDS, help=what)
 
 
-def floor(parser: argparse.ArgumentParser, *, required: bool = False, default: str = "flat"):
+def count(lowest: int, highest: int):
+    """Returns an argparse type: an integer in [lowest, highest]."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = lowest - 1
+        if not lowest <= value <= highest:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not allowed: an integer in [{lowest}, {highest}]"
+            )
+        return value
+
+    return parse
+
+
+def repeats(parser: argparse.ArgumentParser, what: str = "walks on this floor") -> None:
+    """Adds `--repeats`: walks per robot and floor (Table I's 5), at most `MAX_REPEATS`."""
+    parser.add_argument("--repeats", type=count(1, MAX_REPEATS), default=5, help=what)
+
+
+def robot(parser: argparse.ArgumentParser) -> None:
+    """Adds `--robot`: which of Table I's robots (`sim.study.ROBOTS`)."""
+    parser.add_argument(
+        "--robot", default=ROBOTS[0], choices=ROBOTS, help="which robot of Table I's row"
+    )
+
+
+def robot_model(parser: argparse.ArgumentParser) -> None:
+    """Adds `--model`: the robot model a walk runs on (`sim.robot.ROBOT_MODELS`)."""
+    parser.add_argument(
+        "--model",
+        default=ROBOT_MODELS[0],
+        choices=ROBOT_MODELS,
+        help="lean (legs reduced to what meets the floor) or full (every beam a body; slower)",
+    )
+
+
+def floor(parser: argparse.ArgumentParser, *, required: bool = False, default: str = FLAT):
     """Adds `--floor`, one of `sim.robot.FLOORS`."""
     if required:
         parser.add_argument("--floor", required=True, choices=tuple(FLOORS), help="the floor")

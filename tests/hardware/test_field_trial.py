@@ -63,7 +63,7 @@ def source_run(store, tmp_path, approach, genomes=None, grid="", best=BEST_DOC):
 
 
 def trial(uri, cfg, linkage, floor, distances, *extra):
-    argv = ["hexapod", "trial", "--linkage", linkage, "--floor", floor, "--simulate",
+    argv = ["hexapod", "trial", "--linkage", linkage, "--floor", floor, "--emulate",
             "--config", str(cfg), "--seconds", "0.2", "--repeats", str(len(distances)),
             "--tracking-uri", uri, *extra]  # fmt: skip
     if distances:
@@ -101,9 +101,9 @@ def test_field_trials_round_trip_into_table_one(store, tmp_path, config_file, ca
     assert main(["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment]) == 0
     assert capsys.readouterr().out.splitlines() == [
         f"no real field trials logged in experiment {experiment!r}",
-        "4 emulator dry-run field-trial run(s) left out (--simulated shows them)",
+        "4 emulator dry-run field-trial run(s) left out (--emulated shows them)",
     ]
-    argv = ["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment, "--simulated"]
+    argv = ["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment, "--emulated"]
     assert main(argv) == 0
     title, *lines = capsys.readouterr().out.splitlines()
     assert title == "Emulator dry-run field trials:"
@@ -135,7 +135,7 @@ def test_the_table_never_pools_trials_of_different_linkages(store, tmp_path, con
         assert trial(uri, cfg, run_id, "flat", [distance]) == 0
     capsys.readouterr()
     experiment = client.get_experiment(experiment_id).name
-    argv = ["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment, "--simulated"]
+    argv = ["hexapod", "table", "--tracking-uri", uri, "--experiment", experiment, "--emulated"]
     assert main(argv) == 0
     _, _, _, *lines = capsys.readouterr().out.splitlines()
     rows = [[c.strip() for c in line.split("|")][:2] for line in lines[:3]]
@@ -156,7 +156,7 @@ def test_cell_reference_builds_the_document_from_the_repertoire_genome(
     genome = np.random.default_rng(7).random(56)
     run_id = source_run(store, tmp_path, "MAP-LIS", {17: genome, 4242: np.full(56, 0.3)})
     monkeypatch.setattr("sys.stdin", io.StringIO("not a number\n40.4\n"))
-    argv = ["hexapod", "trial", "--linkage", f"{run_id}:17", "--floor", "carpet", "--simulate",
+    argv = ["hexapod", "trial", "--linkage", f"{run_id}:17", "--floor", "carpet", "--emulate",
             "--config", str(config_file("/dev/unused")), "--seconds", "0.2", "--repeats", "1",
             "--tracking-uri", uri, "--robot", "modified"]  # fmt: skip
     assert main(argv) == 0
@@ -175,15 +175,18 @@ def test_cell_reference_builds_the_document_from_the_repertoire_genome(
 @pytest.mark.parametrize(
     ("argv_tail", "message"),
     [
-        (["--robot", "third"], "--robot 'third': allowed first, modified"),
-        (["--repeats", "0"], "--repeats 0: allowed an integer >= 1"),
+        (
+            ["--robot", "third"],
+            "--robot: invalid choice: 'third' (choose from 'first', 'modified')",
+        ),
+        (["--repeats", "0"], "--repeats: '0' is not allowed: an integer in [1, 100]"),
         (["--repeats", "2", "--distance-cm", "5"], "--distance-cm has 1 value(s)"),
         (["--repeats", "1", "--distance-cm", "-5"], "--distance-cm [-5.0]: allowed finite"),
     ],
 )
 def test_bad_trial_arguments_are_usage_errors(argv_tail, message, tmp_path, config_file, capsys):
     uri = f"sqlite:///{tmp_path / 'never-created.db'}"
-    argv = ["hexapod", "trial", "--linkage", "abc", "--floor", "flat", "--simulate",
+    argv = ["hexapod", "trial", "--linkage", "abc", "--floor", "flat", "--emulate",
             "--config", str(config_file("x")), "--tracking-uri", uri, *argv_tail]  # fmt: skip
     assert main(argv) == 2
     assert message in capsys.readouterr().err
@@ -200,7 +203,7 @@ def test_unknown_run_and_cell_are_named(store, tmp_path, config_file, capsys):
         (f"{run_id}:x", "expected RUN_ID, RUN_ID:CELL"),
         (f"{run_id}:1,2,3", "the repertoire has 2 descriptors, so give 2 bin coordinates"),
     ]:
-        argv = ["hexapod", "trial", "--linkage", linkage, "--floor", "flat", "--simulate",
+        argv = ["hexapod", "trial", "--linkage", linkage, "--floor", "flat", "--emulate",
                 "--config", cfg, "--tracking-uri", uri, "--repeats", "1",
                 "--distance-cm", "1"]  # fmt: skip
         assert main(argv) == 2

@@ -27,7 +27,7 @@ def test_simulated_three_second_walk_accounts_for_every_50_hz_slot(config_file, 
     telemetry = tmp_path / "out" / "walk.csv"
     cfg = config_file("/dev/unused")
     code = main(
-        ["hexapod", "walk", "--config", str(cfg), "--seconds", "3", "--simulate",
+        ["hexapod", "walk", "--config", str(cfg), "--seconds", "3", "--emulate",
          "--telemetry", str(telemetry)]
     )  # fmt: skip
     assert code == 0
@@ -51,19 +51,21 @@ def test_simulated_three_second_walk_accounts_for_every_50_hz_slot(config_file, 
 def test_simulate_physics_walks_a_linkage_document_and_refuses_bad_input(config_file, capsys):
     cfg = config_file("/dev/unused")
     linkage = Path(__file__).parents[2] / "benchmarks" / "walk_linkage.json"
-    base = ["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--simulate", "physics"]
+    base = ["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--emulate", "physics"]
     assert main([*base, "--linkage", str(linkage), "--floor", "carpet"]) == 0
     moved = re.search(r"the simulated robot moved (-?[\d.]+) cm along", capsys.readouterr().out)
     assert moved and float(moved.group(1)) > 2.0
     for extra, message in (
-        ([], "--simulate physics needs --linkage"),
-        (["--linkage", str(linkage), "--floor", "ice"], "--floor 'ice': allowed flat, carpet"),
+        ([], "--emulate physics needs --linkage"),
+        (["--linkage", str(linkage), "--floor", "ice"], "invalid choice: 'ice' (choose from"),
     ):
         assert main([*base, *extra]) == 2
         assert message in capsys.readouterr().err
-    assert main(["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--simulate",
+    assert main(["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--emulate",
                  "gazebo"]) == 2  # fmt: skip
-    assert "--simulate 'gazebo': allowed bus, physics" in capsys.readouterr().err
+    assert "--emulate: invalid choice: 'gazebo' (choose from 'bus', 'physics')" in (
+        capsys.readouterr().err
+    )
 
 
 def test_sigint_to_a_walking_process_leaves_motors_stopped(emulator, config_file):
@@ -111,7 +113,7 @@ def test_bad_config_is_a_usage_error_naming_the_value(tmp_path, capsys):
 def test_non_positive_seconds_is_refused(seconds, config_file, capsys):
     code = main(["hexapod", "walk", "--config", str(config_file("x")), "--seconds", seconds])
     assert code == 2
-    assert f"--seconds {float(seconds)}: allowed a positive number" in capsys.readouterr().err
+    assert f"--seconds: '{seconds}' is not allowed: a positive number" in capsys.readouterr().err
 
 
 def test_unreachable_port_is_reported(config_file, capsys):

@@ -121,12 +121,12 @@ def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_pat
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--floor", "ice"], "--floor 'ice': allowed flat, carpet"),
-        (["--floor", "flat", "--seconds", "0"], "--seconds 0.0: allowed a number in (0, 600]"),
-        (["--floor", "flat", "--seconds", "nan"], "--seconds nan"),
-        (["--floor", "flat", "--repeats", "0"], "--repeats 0: allowed an integer in [1, 100]"),
-        (["--floor", "flat", "--robot", "third"], "--robot 'third': allowed first, modified"),
-        (["--floor", "flat", "--model", "cad"], "--model 'cad': allowed lean, full"),
+        (["--floor", "ice"], "--floor: invalid choice: 'ice' (choose from 'flat', 'carpet')"),
+        (["--floor", "flat", "--seconds", "0"], "'0' is not allowed: a number of seconds in (0,"),
+        (["--floor", "flat", "--seconds", "nan"], "--seconds: 'nan' is not allowed"),
+        (["--floor", "flat", "--repeats", "0"], "'0' is not allowed: an integer in [1, 100]"),
+        (["--floor", "flat", "--robot", "third"], "--robot: invalid choice: 'third'"),
+        (["--floor", "flat", "--model", "cad"], "--model: invalid choice: 'cad'"),
     ],
 )
 def test_simulate_refuses_bad_input_before_any_work(store, args, message, capsys):

@@ -11,6 +11,7 @@ import pandas as pd
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
+from linkevo.sim.robot import in_floor_order
 from linkevo.workers.store.artifacts import atomic_path
 from linkevo.workers.store.tables import axis_names, bin_columns, fold_bins, space_of
 
@@ -30,7 +31,7 @@ def draw_walk_map(frame: pd.DataFrame, trial, path: Path) -> Path:
     """
     bins = bin_columns(frame.columns)
     space = space_of(trial.approach, len(bins))
-    floors = sorted(frame["floor"].unique(), key=lambda f: (f != "flat", f))
+    floors = in_floor_order(frame["floor"].unique())
     walked = frame[frame["status"] == "walked"]
     top = walked.loc[~walked["breaks"], "mean_distance_cm"]
     high = max(float(np.nanquantile(top, 0.98)), 1.0) if top.notna().any() else 1.0
