@@ -133,8 +133,8 @@ def resolve_target(target: str) -> Target:
     """Returns the F_p target named `target` ("D16", "D24") or stored in a JSON file.
 
     Raises:
-        ValueError: naming the value when it is neither a published name nor a readable
-            JSON target file.
+        TrialSpecError: naming the value when it is neither a published name nor a
+            readable JSON target file.
     """
     from linkevo.sim.fitness import Target, named_target
 
@@ -142,15 +142,18 @@ def resolve_target(target: str) -> Target:
         return named_target(target)
     path = Path(target)
     if not path.is_file():
-        raise ValueError(
+        raise TrialSpecError(
             f"target {target!r} is neither a published target ({', '.join(TARGETS)}) "
             "nor an existing JSON file"
         )
     try:
         doc = json.loads(path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
-        raise ValueError(f"target file {target!r} is not readable JSON: {exc}") from exc
-    return Target.from_dict(doc, name=path.stem)
+        raise TrialSpecError(f"target file {target!r} is not readable JSON: {exc}") from exc
+    try:
+        return Target.from_dict(doc, name=path.stem)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise TrialSpecError(f"target file {target!r} is not a target ({exc})") from exc
 
 
 def build_optimizer(spec: TrialSpec) -> Optimizer:

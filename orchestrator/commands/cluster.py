@@ -45,42 +45,39 @@ def handler(args: argparse.Namespace) -> int:
     """Runs `linkevo cluster ACTION`."""
     from linkevo.orchestrator import local_cluster as lc
 
-    try:
-        if args.action == "up":
-            settings = lc.ClusterSettings(
-                dir=args.dir,
-                workers=args.workers,
-                cpus_per_worker=args.cpus_per_worker,
-                head_cpus=args.head_cpus,
-                object_store_mb=args.object_store_mb,
-                mlflow_workers=args.mlflow_workers,
-                postgres_port=args.postgres_port,
-                mlflow_port=args.mlflow_port,
-                ray_port=args.ray_port,
-            )
-            state = lc.up(settings)
-            cpus = sum(n.cpus for n in state.nodes)
-            print(f"cluster up in {state.dir}: {len(state.workers)} worker nodes, {cpus} CPUs")
-            print(f"  PostgreSQL   {state.database_uri}")
-            print(f"  MLflow       {state.tracking_uri}   (artefacts in {state.dir}/artifacts)")
-            print(f"  Ray head     {state.address}")
-            print("Run a grid on it:")
-            print(f'  eval "$(linkevo cluster env --dir {shlex.quote(state.dir)})"')
-            print(
-                f"  linkevo grid configs/quick.toml --address {state.address} "
-                f"--tracking-uri {state.tracking_uri}"
-            )
-            print(f"Stop it with: linkevo cluster down --dir {shlex.quote(state.dir)}")
-            return 0
-        if args.action == "down":
-            stopped = lc.down(args.dir)
-            print(f"stopped: {', '.join(stopped)}" if stopped else f"no cluster in {args.dir}")
-            return 0
-        state = lc.ClusterState.load(args.dir)
-        if state is None:
-            raise CliError(f"no cluster in {args.dir}; start one with: linkevo cluster up")
-        for name, value in state.env.items():
-            print(f"export {name}={shlex.quote(value)}")
+    if args.action == "up":
+        settings = lc.ClusterSettings(
+            dir=args.dir,
+            workers=args.workers,
+            cpus_per_worker=args.cpus_per_worker,
+            head_cpus=args.head_cpus,
+            object_store_mb=args.object_store_mb,
+            mlflow_workers=args.mlflow_workers,
+            postgres_port=args.postgres_port,
+            mlflow_port=args.mlflow_port,
+            ray_port=args.ray_port,
+        )
+        state = lc.up(settings)
+        cpus = sum(n.cpus for n in state.nodes)
+        print(f"cluster up in {state.dir}: {len(state.workers)} worker nodes, {cpus} CPUs")
+        print(f"  PostgreSQL   {state.database_uri}")
+        print(f"  MLflow       {state.tracking_uri}   (artefacts in {state.dir}/artifacts)")
+        print(f"  Ray head     {state.address}")
+        print("Run a grid on it:")
+        print(f'  eval "$(linkevo cluster env --dir {shlex.quote(state.dir)})"')
+        print(
+            f"  linkevo grid configs/quick.toml --address {state.address} "
+            f"--tracking-uri {state.tracking_uri}"
+        )
+        print(f"Stop it with: linkevo cluster down --dir {shlex.quote(state.dir)}")
         return 0
-    except lc.ClusterError as exc:
-        raise CliError(str(exc)) from exc
+    if args.action == "down":
+        stopped = lc.down(args.dir)
+        print(f"stopped: {', '.join(stopped)}" if stopped else f"no cluster in {args.dir}")
+        return 0
+    state = lc.ClusterState.load(args.dir)
+    if state is None:
+        raise CliError(f"no cluster in {args.dir}; start one with: linkevo cluster up")
+    for name, value in state.env.items():
+        print(f"export {name}={shlex.quote(value)}")
+    return 0

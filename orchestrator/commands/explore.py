@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,12 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "cell of a trial; the 500 best per trial on a grid's page, which makes the page of "
         "a study-budget grid about 33 MB)",
     )
-    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment")
-    parser.add_argument(
-        "--tracking-uri",
-        default=None,
-        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
-    )
+    options.store(parser)
     parser.add_argument(
         "--out", type=Path, default=None, help="the page (default: reports/explore/REF.html)"
     )

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 from linkevo.workers.store import run_layout as layout
 
 if TYPE_CHECKING:
@@ -50,12 +51,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument("--approach", help="with --best: only this approach")
     parser.add_argument("--fitness", help="with --best: only this fitness")
-    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment")
-    parser.add_argument(
-        "--tracking-uri",
-        default=None,
-        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
-    )
+    options.store(parser)
     parser.add_argument("--out", type=Path, default=None, help="output folder (default pulled)")
     parser.add_argument("--gif", action="store_true", help="also animate one crank turn")
     parser.set_defaults(func=handle)

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 from linkevo.workers.store import run_layout as layout
 
 """What a grid id may hold (it goes into an MLflow filter string)."""
@@ -26,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     which = parser.add_mutually_exclusive_group(required=True)
     which.add_argument("grid_id", nargs="?", help="the grid id (tag grid_id of its runs)")
     which.add_argument("--latest", action="store_true", help="report the latest grid")
-    _store_options(parser)
+    options.store(parser)
     parser.add_argument(
         "--out", type=Path, default=None, help="output folder (default: reports/<grid_id>)"
     )
@@ -55,21 +56,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     compare.add_argument("grid_a", help="the first grid: its id, or a report's trials.csv")
     compare.add_argument("grid_b", help="the second grid: its id, or a report's trials.csv")
-    _store_options(compare)
+    options.store(compare)
     compare.add_argument(
         "--out", type=Path, default=None, help="also write the table to this CSV (default: none)"
     )
     compare.set_defaults(func=compare_handler)
-
-
-def _store_options(parser: argparse.ArgumentParser) -> None:
-    """Adds --tracking-uri and --experiment, the store a grid is read from."""
-    parser.add_argument(
-        "--tracking-uri",
-        default=None,
-        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
-    )
-    parser.add_argument("--experiment", default="linkevo", help="MLflow experiment name")
 
 
 def handler(args: argparse.Namespace) -> int:

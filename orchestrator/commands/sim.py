@@ -132,10 +132,7 @@ def run_eval(args: argparse.Namespace) -> int:
     genomes = load_genomes(args.genomes)
     check_writable(args.out, (".npz",))
     check_angles(args.angles, len(genomes))
-    try:
-        target = resolve_target(args.target)
-    except ValueError as exc:
-        raise CliError(str(exc)) from exc
+    target = resolve_target(args.target)
     ev = evaluate(genomes, args.fitness, args.mode, target, args.angles)
     arrays = {
         "loss": ev.loss,
