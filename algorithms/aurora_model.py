@@ -146,11 +146,6 @@ class PathAutoencoder:
         """Input (and output) width."""
         return self._sizes[0]
 
-    @property
-    def n_parameters(self) -> int:
-        """Weights and biases of all ten layers."""
-        return self._n_parameters
-
     def _weight(self, vector: torch.Tensor, layer: int) -> torch.Tensor:
         w_off, _, fan_in, fan_out = self._layout[layer]
         return vector[w_off : w_off + fan_in * fan_out].view(fan_out, fan_in)
@@ -296,7 +291,8 @@ class PathAutoencoder:
 
         `"layers.<i>.weight"` (out, in) and `"layers.<i>.bias"` (out,) for the ten Linear
         layers i = 0..9 (`reference_module(state)` builds the matching `nn.Sequential`);
-        `"adagrad_sum"` holds the optimiser state, flat (n_parameters,).
+        `"adagrad_sum"` holds the optimiser state, flat (P,): P the weights and biases of
+        all ten layers.
         """
         theta = self._theta.detach().cpu()
         state = {}

@@ -215,10 +215,6 @@ class BaseOptimizer:
             raise RuntimeError("nothing told yet: tell() the first batch")
         return self._best.genome[0].copy(), float(self._scalar(self._best)[0])
 
-    def best_individual(self) -> Individuals | None:
-        """Returns the best-ever individual (one row), None before the first tell."""
-        return self._best
-
     def _keep_best(self, batch: Individuals) -> None:
         loss = self._scalar(batch)
         i = int(np.argmin(np.where(np.isnan(loss), np.inf, loss)))

@@ -72,7 +72,6 @@ class EmulatedMotor:
         self.temperature = 30.0
         self.heating_c_per_s = 0.0
         self.voltage = 12.0
-        self.extra_load = 0
         self.last_update = now
         self.last_packet = now
 
@@ -139,7 +138,7 @@ class EmulatedMotor:
 
     def _refresh_present(self, velocity: float) -> None:
         limit = max(1, self.value(ct.VELOCITY_LIMIT))
-        load = round(velocity / limit * _FULL_SPEED_LOAD) + self.extra_load
+        load = round(velocity / limit * _FULL_SPEED_LOAD)
         self._store(ct.PRESENT_VELOCITY, round(velocity))
         self._store(ct.VELOCITY_TRAJECTORY, round(velocity))
         self._store(ct.PRESENT_POSITION, round(self.position))

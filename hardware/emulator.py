@@ -179,16 +179,6 @@ class BusEmulator:
             motor.advance(self._clock())
             motor.set_hardware_error(bits)
 
-    def set_load(self, motor_id: int, extra_load: int) -> None:
-        """Adds `extra_load` (0.1 % units) to the motor's Present Load."""
-        with self._lock:
-            self._motors[motor_id].extra_load = extra_load
-
-    def set_voltage(self, motor_id: int, volts: float) -> None:
-        """Sets the motor's Present Input Voltage."""
-        with self._lock:
-            self._motors[motor_id].voltage = volts
-
     # --- serving ----------------------------------------------------------------------
 
     def _serve(self) -> None:

@@ -11,8 +11,6 @@ from linkevo.algorithms.pareto import non_dominated_ranks
 from linkevo.orchestrator.report.load import GridData, read_archive
 from linkevo.sim.study import is_map_elites, is_pareto
 
-MEASURE_COLUMNS: tuple[str, ...] = ("stagnation", "descriptor_correlation", "front_size")
-
 
 def stagnation(history: pd.DataFrame) -> float:
     """Returns the share of a trial's evaluations spent after its last best-loss
@@ -46,7 +44,7 @@ def front_size(archive: pd.DataFrame) -> float:
 
 
 def trial_measures(grid: GridData) -> pd.DataFrame:
-    """Returns the finished trials (`GridData.finished`) with `MEASURE_COLUMNS` added:
+    """Returns the finished trials (`GridData.finished`) with three measures added:
     stagnation (every approach), descriptor_correlation (MAP-Elites repertoires) and
     front_size (NSGA-II populations); NaN where a measure does not apply or its data is
     missing."""
