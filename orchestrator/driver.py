@@ -11,7 +11,8 @@ import shutil
 import sys
 import time
 from dataclasses import dataclass
-from typing import TextIO
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
 
 from linkevo.orchestrator.config import ConfigError
 from linkevo.orchestrator.fan_out import (
@@ -45,6 +46,9 @@ from linkevo.workers.store.outage import (
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
 from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
+
+if TYPE_CHECKING:
+    from mlflow.entities import Run
 
 
 @dataclass(frozen=True)
@@ -86,13 +90,13 @@ def launch(
 ) -> GridResult:
     """Runs every trial of `grid` not already FINISHED and returns how each ended.
 
-    Order: build and check every trial spec, check the tracking store, check that one
-    trial's reservation fits (this machine's CPUs for a local instance, before Ray starts;
-    else the cluster's, once connected), create the MLflow database and experiment,
-    take the grid's lease (`lease`: one driver per grid), mark stale RUNNING runs
-    KILLED (resume), plan the reservation for the trials left
-    (`orchestrator.reservation`), start a local Ray instance, warm the numba kernel, log
-    (or on resume reuse) the grid's parent run, fan out one task per trial.
+    Phases: the checks (`launch_checks`: every trial spec, the store, one trial's
+    reservation against this machine's CPUs for a local instance, before Ray starts, or
+    the cluster's once connected), the store (database, experiment, the grid's lease:
+    one driver per grid), what earlier launches left (`_settle_earlier_runs`), the
+    reservation for the trials left (`orchestrator.reservation`), Ray (a local instance,
+    the numba kernel warmed), the parent run (logged, or on resume reused), the trials
+    (`_run_trials`: one task per trial), the parent run's end (`_end_parent_run`).
 
     Args:
         grid: the grid to run.
@@ -127,34 +131,9 @@ def launch(
         Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
         store = RunStore(uri, cfg.experiment, experiment_id=experiment_id)
-        client = store.client
-        lease = Lease.take(client, uri, experiment_id, Subject.grid(grid.grid_id))
-        earlier = store.trial_runs(grid.grid_id)
-        if earlier and not resume:
-            raise ConfigError(
-                f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {uri}; "
-                "pass --resume to complete it (or, with a larger trials, to extend it), or "
-                "change the config (e.g. --set seed=1)"
-            )
-        check_no_shrink(grid, earlier)
+        lease = Lease.take(store.client, uri, experiment_id, Subject.grid(grid.grid_id))
         root = work_root(cfg, uri)
-        if resume and not earlier:
-            check_store_holds_grid(grid_record(root, grid), uri, grid)
-        finished = {
-            r.data.tags[layout.TRIAL_KEY]: r for r in earlier if r.info.status == "FINISHED"
-        }
-        for run in earlier:
-            if run.info.status == "RUNNING":
-                end_run(client, run.info.run_id, "KILLED", "stale: the grid driver stopped")
-        done_restarts = sorted(set(restart) & set(finished))
-        if done_restarts:
-            raise ConfigError(
-                f"--restart-trial {', '.join(done_restarts)}: already FINISHED; a finished "
-                "trial is kept (change the config for a new grid)"
-            )
-        for cell in grid.cells:
-            if cell.key in restart:
-                shutil.rmtree(trial_dir(root, grid, cell), ignore_errors=True)
+        finished = _settle_earlier_runs(store, grid, root, resume=resume, restart=restart)
         todo = [cell for cell in grid.cells if cell.key not in finished]
         reservation = Reservation.plan(cfg, len(todo), cluster)
         if todo and local:
@@ -169,33 +148,11 @@ def launch(
         write_json_atomic(grid_record(root, grid), record)
         ctx = TrialContext(store, parent_run_id, root, specs, reservation, started_ray, watch)
         view = Progress(ctx, grid, len(grid.cells) - len(todo), progress, stream)
-        try:
-            with signals_stop_the_grid() as received:
-                ran = fan_out(grid, todo, ctx, view, received)
-        except BaseException as exc:
-            if isinstance(exc, GridInterrupted):
-                exc.finished += len(finished)
-            if not isinstance(exc, ServerLost) and answers(uri):
-                running = store.trial_runs(grid.grid_id, status="RUNNING")
-                for run in running:
-                    end_run(client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
-                end_run(client, parent_run_id, "KILLED", layout.error_text(exc))
-            elif not isinstance(exc, ServerLost | KeyboardInterrupt | GridInterrupted):
-                since = watch.down_since or time.time()
-                during = f"the driver ({layout.error_text(exc)})"
-                raise ServerLost(uri, since, watch.limit_s, during) from exc
-            raise  # a silent server cannot be written: --resume marks the runs
-        finally:
-            view.close()
-            watch.close()
+        ran = _run_trials(ctx, grid, todo, view, len(finished))
         outcomes = tuple(
             outcome_of(finished[c.key]) if c.key in finished else ran[c.key] for c in grid.cells
         )
-        status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
-        patiently(
-            lambda: log_grid_summary(client, parent_run_id, grid, outcomes), uri, watch.limit_s
-        )
-        patiently(lambda: client.set_terminated(parent_run_id, status), uri, watch.limit_s)
+        _end_parent_run(ctx, grid, outcomes)
     finally:
         if lease is not None:
             lease.release(write=watch is None or watch.down_since is None)
@@ -212,3 +169,76 @@ def launch(
         skipped=tuple(c.key for c in grid.cells if c.key in finished),
         seconds=time.monotonic() - start,
     )
+
+
+def _settle_earlier_runs(
+    store: RunStore, grid: Grid, root: Path, *, resume: bool, restart: tuple[str, ...]
+) -> dict[str, Run]:
+    """Returns the grid's FINISHED trial runs by key, after settling what earlier launches
+    left: refused without `resume`; a store that lost the grid refused; runs left RUNNING
+    (a driver that died) marked KILLED; the folders of the `restart` trials removed.
+
+    Raises:
+        ConfigError: trial runs exist without `resume`, the grid would shrink, the store
+            lost the grid, or a FINISHED trial is to be restarted.
+    """
+    earlier = store.trial_runs(grid.grid_id)
+    if earlier and not resume:
+        raise ConfigError(
+            f"grid {grid.grid_id} already has {len(earlier)} trial run(s) in {store.uri}; "
+            "pass --resume to complete it (or, with a larger trials, to extend it), or "
+            "change the config (e.g. --set seed=1)"
+        )
+    check_no_shrink(grid, earlier)
+    if resume and not earlier:
+        check_store_holds_grid(grid_record(root, grid), store.uri, grid)
+    finished = {r.data.tags[layout.TRIAL_KEY]: r for r in earlier if r.info.status == "FINISHED"}
+    for run in earlier:
+        if run.info.status == "RUNNING":
+            end_run(store.client, run.info.run_id, "KILLED", "stale: the grid driver stopped")
+    done_restarts = sorted(set(restart) & set(finished))
+    if done_restarts:
+        raise ConfigError(
+            f"--restart-trial {', '.join(done_restarts)}: already FINISHED; a finished "
+            "trial is kept (change the config for a new grid)"
+        )
+    for cell in grid.cells:
+        if cell.key in restart:
+            shutil.rmtree(trial_dir(root, grid, cell), ignore_errors=True)
+    return finished
+
+
+def _run_trials(
+    ctx: TrialContext, grid: Grid, todo: list, view: Progress, finished: int
+) -> dict[str, TrialOutcome]:
+    """Fans the trials out (`fan_out`) and returns how each ended. Stopped by a signal or
+    an error, it marks the runs in flight and the parent run KILLED where the store still
+    answers, and re-raises (a silent store is left to `--resume` to mark)."""
+    uri, watch = ctx.uri, ctx.watch
+    try:
+        with signals_stop_the_grid() as received:
+            return fan_out(grid, todo, ctx, view, received)
+    except BaseException as exc:
+        if isinstance(exc, GridInterrupted):
+            exc.finished += finished
+        if not isinstance(exc, ServerLost) and answers(uri):
+            for run in ctx.store.trial_runs(grid.grid_id, status="RUNNING"):
+                end_run(ctx.client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
+            end_run(ctx.client, ctx.parent_run_id, "KILLED", layout.error_text(exc))
+        elif not isinstance(exc, ServerLost | KeyboardInterrupt | GridInterrupted):
+            since = watch.down_since or time.time()
+            during = f"the driver ({layout.error_text(exc)})"
+            raise ServerLost(uri, since, watch.limit_s, during) from exc
+        raise
+    finally:
+        view.close()
+        watch.close()
+
+
+def _end_parent_run(ctx: TrialContext, grid: Grid, outcomes: tuple[TrialOutcome, ...]) -> None:
+    """Logs the grid's summary to its parent run and ends it FINISHED, or FAILED when a
+    trial did not finish (waiting out a silent server within its limit)."""
+    client, limit = ctx.client, ctx.watch.limit_s
+    status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
+    patiently(lambda: log_grid_summary(client, ctx.parent_run_id, grid, outcomes), ctx.uri, limit)
+    patiently(lambda: client.set_terminated(ctx.parent_run_id, status), ctx.uri, limit)

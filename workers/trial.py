@@ -249,52 +249,110 @@ def run_trial(
             "versions": versions(),
         },
     )
-    timings = dict.fromkeys(("ask", "evaluate", "tell", "record", "checkpoint", "final"), 0.0)
-    stopped_by = "budget"
-    clock = time.perf_counter()
+    laps = _Laps()
+    stopped_by = _search(spec, optimizer, evaluator, recorder, log, folder, laps, start)
+    metrics = _finish(spec, optimizer, recorder, out_dir)
+    result = TrialResult(
+        spec=spec,
+        out_dir=out_dir,
+        iterations=optimizer.iteration,
+        evaluations=optimizer.evaluations,
+        best_loss=metrics.pop("best_loss_kept"),
+        metrics=metrics,
+        seconds=time.monotonic() - start,
+        timings=laps.timings,
+        stopped_by=stopped_by,
+    )
+    write_json_atomic(
+        out_dir / RESULT_FILE,
+        {
+            "iterations": result.iterations,
+            "evaluations": result.evaluations,
+            "best_loss": result.best_loss,
+            "metrics": metrics,
+            "stopped_by": stopped_by,
+            "seconds": result.seconds,
+        },
+    )
+    laps.lap("final")
+    recorder.log_artifacts(out_dir)
+    return result
 
-    def lap(phase: str) -> None:
-        nonlocal clock
+
+class _Laps:
+    """Seconds spent per phase of a trial: ask, evaluate, tell, record, checkpoint, final."""
+
+    def __init__(self) -> None:
+        self.timings = dict.fromkeys(
+            ("ask", "evaluate", "tell", "record", "checkpoint", "final"), 0.0
+        )
+        self._clock = time.perf_counter()
+
+    def lap(self, phase: str) -> None:
         now = time.perf_counter()
-        timings[phase] += now - clock
-        clock = now
+        self.timings[phase] += now - self._clock
+        self._clock = now
+
+
+def _search(
+    spec: TrialSpec,
+    optimizer: Optimizer,
+    evaluator: Evaluator,
+    recorder: Recorder,
+    log: MetricsCsv,
+    folder: Path,
+    laps: _Laps,
+    start: float,
+) -> str:
+    """Runs ask -> evaluate -> tell -> record until the budget is spent (or the time
+    limit); returns what stopped it ("budget" or "max_seconds").
+
+    An iteration's bookkeeping runs while the next batch is being evaluated: a remote
+    evaluator computes meanwhile (docs/grid.md, "Bookkeeping overlap"). ask() leaves what
+    metrics() reads unchanged; the checkpoint state is taken right after tell().
+    """
 
     def bookkeeping(iteration: int, state: dict[str, np.ndarray] | None) -> None:
         """Records iteration's metrics and saves the checkpoint state taken after its tell."""
         metrics = optimizer.metrics()
         log.append(metrics)
         recorder.log_iteration(iteration, metrics)
-        lap("record")
+        laps.lap("record")
         if state is not None:
             _checkpoint(spec, state, optimizer, iteration, folder)
-            lap("checkpoint")
+            laps.lap("checkpoint")
 
-    # An iteration's bookkeeping runs while the next batch is being evaluated: a remote
-    # evaluator computes meanwhile (docs/grid.md, "Bookkeeping overlap"). ask() leaves
-    # what metrics() reads unchanged; the checkpoint state is taken right after tell().
     deferred: tuple[int, dict[str, np.ndarray] | None] | None = None
     try:
         while optimizer.evaluations + spec.batch_size <= spec.evaluations:
             genomes = optimizer.ask()
-            lap("ask")
+            laps.lap("ask")
             pending = evaluator.submit(genomes)
-            lap("evaluate")
+            laps.lap("evaluate")
             if deferred is not None:
                 done, deferred = deferred, None
                 bookkeeping(*done)
             evaluation = pending()
-            lap("evaluate")
+            laps.lap("evaluate")
             optimizer.tell(genomes, evaluation)
-            lap("tell")
+            laps.lap("tell")
             due = optimizer.iteration % spec.checkpoint_every == 0
             deferred = (optimizer.iteration, optimizer.state_dict() if due else None)
             if spec.max_seconds is not None and time.monotonic() - start >= spec.max_seconds:
-                stopped_by = "max_seconds"
-                break
+                return "max_seconds"
+        return "budget"
     finally:  # a failed evaluation still leaves the last told iteration recorded
         if deferred is not None:
             bookkeeping(*deferred)
-    _checkpoint(spec, optimizer.state_dict(), optimizer, optimizer.iteration, folder)
+
+
+def _finish(spec: TrialSpec, optimizer: Optimizer, recorder: Recorder, out_dir: Path) -> dict:
+    """Writes the end-of-trial files, records the final measures (path diversity; the best
+    walker with `walk_rerank`) and returns the last metrics, with the best loss kept as
+    `best_loss_kept`."""
+    _checkpoint(
+        spec, optimizer.state_dict(), optimizer, optimizer.iteration, out_dir / CHECKPOINT_DIR
+    )
     best_loss, view = _write_final(spec, optimizer, out_dir)
     metrics = optimizer.metrics()
     metrics["path_diversity"] = (
@@ -305,28 +363,4 @@ def run_trial(
         walked = rerank_by_walking(spec, view, out_dir)
         metrics["best_walk_cm"] = walked
         recorder.log_iteration(optimizer.iteration, {"best_walk_cm": walked})
-    result = TrialResult(
-        spec=spec,
-        out_dir=out_dir,
-        iterations=optimizer.iteration,
-        evaluations=optimizer.evaluations,
-        best_loss=best_loss,
-        metrics=metrics,
-        seconds=time.monotonic() - start,
-        timings=timings,
-        stopped_by=stopped_by,
-    )
-    write_json_atomic(
-        out_dir / RESULT_FILE,
-        {
-            "iterations": result.iterations,
-            "evaluations": result.evaluations,
-            "best_loss": best_loss,
-            "metrics": metrics,
-            "stopped_by": stopped_by,
-            "seconds": result.seconds,
-        },
-    )
-    lap("final")
-    recorder.log_artifacts(out_dir)
-    return result
+    return {**metrics, "best_loss_kept": best_loss}
