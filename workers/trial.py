@@ -251,13 +251,13 @@ def run_trial(
     )
     laps = _Laps()
     stopped_by = _search(spec, optimizer, evaluator, recorder, log, folder, laps, start)
-    metrics = _finish(spec, optimizer, recorder, out_dir)
+    best_loss, metrics = _finish(spec, optimizer, recorder, out_dir)
     result = TrialResult(
         spec=spec,
         out_dir=out_dir,
         iterations=optimizer.iteration,
         evaluations=optimizer.evaluations,
-        best_loss=metrics.pop("best_loss_kept"),
+        best_loss=best_loss,
         metrics=metrics,
         seconds=time.monotonic() - start,
         timings=laps.timings,
@@ -346,13 +346,13 @@ def _search(
             bookkeeping(*deferred)
 
 
-def _finish(spec: TrialSpec, optimizer: Optimizer, recorder: Recorder, out_dir: Path) -> dict:
+def _finish(
+    spec: TrialSpec, optimizer: Optimizer, recorder: Recorder, out_dir: Path
+) -> tuple[float, dict]:
     """Writes the end-of-trial files, records the final measures (path diversity; the best
-    walker with `walk_rerank`) and returns the last metrics, with the best loss kept as
-    `best_loss_kept`."""
-    _checkpoint(
-        spec, optimizer.state_dict(), optimizer, optimizer.iteration, out_dir / CHECKPOINT_DIR
-    )
+    walker with `walk_rerank`); returns the best loss kept and the last metrics."""
+    folder = out_dir / CHECKPOINT_DIR
+    _checkpoint(spec, optimizer.state_dict(), optimizer, optimizer.iteration, folder)
     best_loss, view = _write_final(spec, optimizer, out_dir)
     metrics = optimizer.metrics()
     metrics["path_diversity"] = (
@@ -363,4 +363,4 @@ def _finish(spec: TrialSpec, optimizer: Optimizer, recorder: Recorder, out_dir: 
         walked = rerank_by_walking(spec, view, out_dir)
         metrics["best_walk_cm"] = walked
         recorder.log_iteration(optimizer.iteration, {"best_walk_cm": walked})
-    return {**metrics, "best_loss_kept": best_loss}
+    return best_loss, metrics
