@@ -16,6 +16,11 @@ best of `--repeats` runs, simulated seconds per wall second:
 The distance each model walks is printed beside, and the lean walk's speed over the full
 walk's is the ratio against today's code. Goal: walk >= 20x real time (a 10-s trial in
 <= 0.5 s).
+
+With `--against TREE` (another checkout, `git worktree add ../base REV`) it times instead
+the walk of each floor and model as this tree's code and as TREE's runs it, in separate
+processes taking turns, and prints each tree's best time and the ratio (the same walk:
+the distances agree).
 """
 
 from __future__ import annotations
@@ -24,6 +29,9 @@ import argparse
 import json
 import os
 import platform
+import subprocess
+import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -44,8 +52,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--floor", nargs="+", default=list(FLOORS))
+    parser.add_argument("--against", type=Path, default=None, help="another checkout to time")
     args = parser.parse_args()
     os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
+    if args.against is not None:
+        against(args)
+        return
     genome, mode = from_document(json.loads(args.linkage.read_text(encoding="utf-8")))
     leg = leg_from_genome(genome, mode)
     print(
@@ -96,6 +108,56 @@ def main() -> None:
         ratio = lean["walk_x_real_time"] / full["walk_x_real_time"]
         print(f"{name:>6}: lean walk / full walk {ratio:.1f}x")
     print(json.dumps(figures))
+
+
+TIMED_WALK = """
+import json, sys, time
+from linkevo.sim.leg import leg_from_genome
+from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.robot import FLOORS
+try:
+    from linkevo.sim.walking import WalkSettings, walk
+except ImportError:  # a tree from before sim/walk.py was named sim/walking.py
+    from linkevo.sim.walk import WalkSettings, walk
+linkage, floor, model, seconds = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
+leg = leg_from_genome(*from_document(json.load(open(linkage))))
+settings = WalkSettings(seconds=seconds, model=model)
+walk(leg, FLOORS[floor], settings=settings)  # warm
+start = time.perf_counter()
+result = walk(leg, FLOORS[floor], settings=settings)
+print(time.perf_counter() - start, result.distance_m)
+"""
+
+
+def against(args: argparse.Namespace) -> None:
+    """Prints, per floor and model, the best walk time of this tree's code and of
+    `args.against`'s, taking turns, and their ratio."""
+    from trees import tree_env  # benchmarks/trees.py, beside this script
+
+    repo = Path(__file__).resolve().parents[1]
+    with tempfile.TemporaryDirectory(prefix="linkevo-walk-speed-") as tmp:
+        trees = {"this tree": tree_env(repo, Path(tmp))}
+        trees[str(args.against)] = tree_env(args.against, Path(tmp))
+        for name in args.floor:
+            for model in MODELS:
+                best: dict[str, tuple[float, float]] = {}
+                for _ in range(args.repeats):
+                    for tree, env in trees.items():
+                        done = subprocess.run(
+                            [sys.executable, "-c", TIMED_WALK, str(args.linkage.resolve()), name,
+                             model, str(args.seconds)],
+                            env=env, capture_output=True, text=True, check=True,
+                        )  # fmt: skip
+                        seconds, distance = map(float, done.stdout.split())
+                        if tree not in best or seconds < best[tree][0]:
+                            best[tree] = (seconds, distance)
+                times = ", ".join(
+                    f"{tree} {s:.3f} s ({d * 100:.1f} cm)" for tree, (s, d) in best.items()
+                )
+                this, other = best["this tree"][0], best[str(args.against)][0]
+                print(
+                    f"{name:>6} {model:>4}: {times}; {args.against} / this tree {other / this:.2f}"
+                )
 
 
 def _timed(run) -> float:
