@@ -173,3 +173,22 @@ def test_a_frame_too_heavy_for_lego_pins_breaks_on_pin_loads(jansen):
     heavy = walk(jansen, FLOORS["flat"], settings=SHORT, frame=Frame(mass_kg=40.0))
     assert heavy.pin_force_n[2] > 60.0
     assert heavy.breaks and "pin loads" in heavy.reason
+
+
+def test_linkevo_sim_walks_a_robot_from_a_document_as_a_notebook_would():
+    """`from linkevo.sim import ...` gives the walking functions, never a module they
+    share a name with, and walks a robot from a linkage document."""
+    import json
+    import types
+    from pathlib import Path
+
+    import linkevo.sim as sim
+
+    doc = json.loads((Path(__file__).parents[2] / "benchmarks" / "walk_linkage.json").read_text())
+    from linkevo.sim import FLOORS, WalkSettings, from_document, leg_from_genome
+    from linkevo.sim import walk as walk_fn
+
+    assert not any(isinstance(getattr(sim, name), types.ModuleType) for name in sim.__all__)
+    result = walk_fn(leg_from_genome(*from_document(doc)), FLOORS["flat"],
+                     settings=WalkSettings(seconds=1.0))  # fmt: skip
+    assert result.distance_m > 0.01 and not result.breaks
