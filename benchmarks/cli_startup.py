@@ -61,7 +61,7 @@ def main() -> None:
                       f"(min {min(values):.2f}, max {max(values):.2f})")  # fmt: skip
             if args.against is not None:
                 ratios = [a / b for a, b in zip(*times.values(), strict=True)]
-                print(f"  {args.against} / this tree: median ratio {statistics.median(ratios):.1f}")
+                print(f"  this tree / {args.against}: median ratio {statistics.median(ratios):.2f}")
 
 
 if __name__ == "__main__":
