@@ -99,16 +99,18 @@ class PhysicsWorld:
             while d.time + step / 2 < target:
                 chunk = max(1, min(round(_TICK_S / step), round((target - d.time) / step)))
                 goal = d.ctrl[robot.actuators].copy()
-                limits = m.actuator_forcerange[robot.actuators].copy()
                 for motor_id, motor in self.motors.items():
                     i = self.slot_of[motor_id]
-                    speed = float(d.qvel[robot.crank_dof[i]])
+                    act, dof = robot.actuators[i], robot.crank_dof[i]
                     if motor.torque_on:
                         goal[i] = motor.direction * motor.commanded_units() * _RAD_S_PER_UNIT
-                        limits[i] = self.motor.torque_limits(np.array(speed))
-                    else:
-                        goal[i], limits[i] = 0.0, (-HOLDING_NM, HOLDING_NM)
-                control_tick(robot, d, goal, limits, chunk)
+                        m.actuator_forcerange[act] = (-self.motor.stall_nm, self.motor.stall_nm)
+                        m.dof_damping[dof] = self.motor.back_emf_damping
+                    else:  # the drive off: the gearbox holds, no back-EMF
+                        goal[i] = 0.0
+                        m.actuator_forcerange[act] = (-HOLDING_NM, HOLDING_NM)
+                        m.dof_damping[dof] = 0.0
+                control_tick(robot, d, goal, chunk)
 
     def crank(self, motor_id: int) -> tuple[float, float, float]:
         """Returns (phase rad, speed rad/s, torque N·m) of the motor's crank, in the
@@ -119,7 +121,7 @@ class PhysicsWorld:
             return (
                 float(robot.start_phases[i] + d.qpos[robot.crank_qpos[i]]),
                 float(d.qvel[robot.crank_dof[i]]),
-                float(d.actuator_force[robot.actuators[i]]),
+                float(robot.motor_torque(d)[i]),
             )
 
     def body(self) -> np.ndarray:

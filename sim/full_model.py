@@ -25,6 +25,7 @@ from linkevo.sim.robot import BEAM_RADIUS_M, LEG_SLOTS, UNIT_M, Floor, Frame, Mo
 from linkevo.sim.robot_model import (
     BEAM_RGBA,
     CRANK_RGBA,
+    EQUALITY_SOLIMP,
     LEG_CONTACT,
     NO_CONTACT,
     RobotModel,
@@ -121,7 +122,8 @@ def build_robot(
         ),
         n_loops=sum(len(b.pin_names) for b in builders),
     )
-    return robot_model(model, legs, phases, loads)
+    foot_layers = {b.slot: b.foot_layer for b in builders}
+    return robot_model(model, legs, phases, loads, motor, frame, foot_layers)
 
 
 class _LegBuilder:
@@ -182,6 +184,7 @@ class _LegBuilder:
                         self._close_loop(spec, child, origin, owner[node], nodes[node], b, leg)
         self.lowest -= BEAM_RADIUS_M
         foot_body, foot_origin, foot_layer = owner[leg.foot]
+        self.foot_layer = foot_layer
         foot_body.add_site(
             name=f"{slot}/foot",
             pos=(self._world(nodes[leg.foot], foot_layer) - foot_origin).tolist(),
@@ -220,5 +223,6 @@ class _LegBuilder:
             name2=other_body.name,
             data=[*anchor] + [0.0] * 9,
             solref=[2 * self._timestep, 1.0],
+            solimp=EQUALITY_SOLIMP,
         )
         self.pin_names.append(name)

@@ -29,6 +29,7 @@ from linkevo.sim.leg import Leg
 from linkevo.sim.robot import BEAM_RADIUS_M, LEG_SLOTS, UNIT_M, Floor, Frame, Motor
 from linkevo.sim.robot_model import (
     BEAM_RGBA,
+    EQUALITY_SOLIMP,
     LEG_CONTACT,
     RobotModel,
     add_beam,
@@ -46,8 +47,6 @@ LEAN_TIMESTEP_S = 0.002
 (docs/walking.md)."""
 CONTACT_INERTIA_KG = 0.05
 """Armature of a coupled part's slides (its hinge gets this times (5 cm)²)."""
-EQUALITY_SOLIMP = [0.999, 0.9999, 0.001, 0.5, 2.0]
-"""Near-hard couplings: a part stays within a fraction of a millimetre of its pose."""
 _DEGREE = 4
 _WINDOW = 10  # poses either side of the centre in each quartic fit
 
@@ -246,6 +245,7 @@ def build_lean_robot(
     )  # fmt: skip
     spec, body = robot_spec(floor, frame, timestep, extra_kg=carried)
     rows: list[_Row] = []
+    foot_layers: dict[str, int] = {}
     lowest = -frame.height / 2
     for i, slot in enumerate(LEG_SLOTS):
         leg, world = legs[slot], leg_frame(slot, legs[slot], frame)
@@ -279,7 +279,8 @@ def build_lean_robot(
             b for b in range(len(leg.beams)) if leg.foot in leg.beams[b] and reach[slot][b]
         )
         owner, origin = sites[int(leg.part[foot_beam])]
-        foot = world(nodes[leg.foot], int(leg.layer[foot_beam]))
+        foot_layers[slot] = int(leg.layer[foot_beam])
+        foot = world(nodes[leg.foot], foot_layers[slot])
         owner.add_site(name=f"{slot}/foot", pos=(foot - origin).tolist(), size=[0.004, 0, 0])
         add_motor(spec, slot, motor)
     body.pos = [0.0, 0.0, -(lowest - BEAM_RADIUS_M) + drop]
@@ -304,7 +305,7 @@ def build_lean_robot(
         statics=tuple(statics[id(legs[s])] for s in LEG_SLOTS),
         n_poses=legs[LEG_SLOTS[0]].paths.shape[1],
     )
-    return robot_model(model, legs, phases, coupling)
+    return robot_model(model, legs, phases, coupling, motor, frame, foot_layers)
 
 
 @dataclass(frozen=True)

@@ -47,10 +47,13 @@ class Motor:
     stall, 55 rpm no load at 12 V). Its firmware velocity loop sets
     `v = ke * (w_goal + loop_gain * (w_goal - w))`, clipped to the supply.
 
-    Unclipped, that loop is a velocity servo, torque `servo_gain * (w_goal - w)`; the clip
-    bounds its torque by the torque-speed line (`torque_limits`). The walk simulates it so
-    (`sim.walking`): MuJoCo integrates the servo implicitly and the limits follow the speed
-    at every control tick."""
+    The torque is `kt/R * clip(v, -voltage, voltage) - b * w`, b = kt/R * ke the back-EMF's
+    damping: the drive `clip(drive_gain * w_goal - drive_bias * w, -stall, stall)` less
+    `b * w`. Unclipped, that is a velocity servo, torque `servo_gain * (w_goal - w)`;
+    clipped, the torque-speed line (`speed_at`). MuJoCo integrates both parts at every
+    physics step (`sim.robot_model.add_motor`): the drive as the crank's actuator (its gain,
+    its velocity bias and its force range), the back-EMF as the crank's joint damping, so
+    a braked crank turns on the datasheet's line whatever the control tick."""
 
     stall_nm: float = 2.5
     no_load_rpm: float = 55.0
@@ -74,11 +77,26 @@ class Motor:
         """Torque per rad/s of speed error of the unclipped velocity loop, N·m·s/rad."""
         return self.kt_over_r * self.ke * (1.0 + self.loop_gain)
 
-    def torque_limits(self, speed: np.ndarray) -> np.ndarray:
-        """Returns (..., 2) the least and largest torque (N·m) at the supply's limits, for
-        speeds (...) in rad/s: the torque-speed line at -voltage and +voltage."""
-        back = self.kt_over_r * self.ke * np.asarray(speed, dtype=float)
-        return np.stack([-self.stall_nm - back, self.stall_nm - back], axis=-1)
+    @property
+    def back_emf_damping(self) -> float:
+        """b: the back-EMF's torque per rad/s (kt/R * ke), N·m·s/rad."""
+        return self.kt_over_r * self.ke
+
+    @property
+    def drive_gain(self) -> float:
+        """The drive's torque per rad/s of speed goal (before the supply's clip)."""
+        return self.servo_gain
+
+    @property
+    def drive_bias(self) -> float:
+        """The drive's torque per rad/s of speed (the loop's feedback, before the clip)."""
+        return self.back_emf_damping * self.loop_gain
+
+    def speed_at(self, torque: np.ndarray) -> np.ndarray:
+        """Returns the speed (rad/s) on the torque-speed line at full supply for a load
+        torque (N·m): the datasheet's line."""
+        w0 = self.no_load_rpm * 2.0 * math.pi / 60.0
+        return w0 * (1.0 - np.asarray(torque, dtype=float) / self.stall_nm)
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,11 @@ NO_CONTACT = {"contype": 0, "conaffinity": 0}
 CONTACT_REACH = 4.0
 """A beam whose lowest point over the turn stays more than this many modules above the
 leg's lowest point cannot reach the floor unless the robot tips over: it gets no contact."""
+EQUALITY_SOLIMP = [0.999, 0.9999, 0.001, 0.5, 2.0]
+"""Near-hard equalities (the lean model's couplings, the full model's loop-closing pins):
+a part stays within a fraction of a millimetre of its pose, so a foot stays within 1 mm of
+where its linkage puts it (`Walk.foot_deviation_mm`; MuJoCo's default lets a full-model
+leg's pins open by a millimetre each, and the foot stray 4-5 mm)."""
 BEAM_RGBA = [0.75, 0.75, 0.78, 1]
 CRANK_RGBA = [0.85, 0.6, 0.1, 1]
 
@@ -81,6 +86,9 @@ class RobotModel:
         start_phases: (6,) the crank angle (radians) each leg was built at.
         stroke_m: (6,) each leg's stance stroke in metres.
         loads: the model's legs as the walk samples them (`LegLoads`).
+        motor: the motor on every crank (`sim.robot.Motor`).
+        foot_paths: (6, A, 3) each foot's kinematic path over a turn, in the frame's
+            coordinates (where the linkage puts the foot at crank angle k 2pi/A).
     """
 
     model: mujoco.MjModel
@@ -93,18 +101,50 @@ class RobotModel:
     start_phases: np.ndarray
     stroke_m: np.ndarray
     loads: LegLoads
+    motor: Motor
+    foot_paths: np.ndarray
+
+    def foot_deviation(
+        self, phases: np.ndarray, body: np.ndarray, mats: np.ndarray, feet: np.ndarray
+    ) -> np.ndarray:
+        """Returns (T, 6) each foot's distance (m) from where the linkage puts it at its
+        crank's angle, over T ticks.
+
+        Args:
+            phases: (T, 6) the cranks' angles (radians, the linkage's frame).
+            body: (T, 3) the frame's position; mats: (T, 3, 3) its orientation.
+            feet: (T, 6, 3) the foot sites' positions.
+        """
+        n = self.foot_paths.shape[1]
+        u = np.mod(phases / (2 * np.pi) * n, n)  # (T, 6) fractional pose index
+        low = np.floor(u).astype(np.int64)
+        share = (u - low)[..., None]
+        legs = np.arange(6)[None, :]
+        local = (1 - share) * self.foot_paths[legs, low % n] + share * self.foot_paths[
+            legs, (low + 1) % n
+        ]  # (T, 6, 3) in the frame's coordinates
+        expected = body[:, None, :] + np.einsum("tij,tkj->tki", mats, local)
+        return np.linalg.norm(feet - expected, axis=2)
+
+    def motor_torque(self, data: mujoco.MjData) -> np.ndarray:
+        """Returns (6,) each motor's torque on its crank (N·m): the drive less the
+        back-EMF."""
+        speed = data.qvel[self.crank_dof]
+        return data.actuator_force[self.actuators] - self.motor.back_emf_damping * speed
+
+    def at_supply_limit(self, data: mujoco.MjData) -> np.ndarray:
+        """Returns (6,) bool: each motor's drive clipped by its supply (on its torque-speed
+        line)."""
+        drive = np.abs(data.actuator_force[self.actuators])
+        return drive >= self.model.actuator_forcerange[self.actuators, 1] * (1 - 1e-3)
 
 
-def control_tick(
-    robot: RobotModel, data: mujoco.MjData, goal: np.ndarray, limits: np.ndarray, steps: int
-) -> None:
-    """One control tick: each motor's speed goal (rad/s, (6,)) and torque limits ((6, 2)
-    N·m), the model's per-tick hook, then `steps` physics steps."""
-    model = robot.model
+def control_tick(robot: RobotModel, data: mujoco.MjData, goal: np.ndarray, steps: int) -> None:
+    """One control tick: each motor's speed goal (rad/s, (6,)), the model's per-tick hook,
+    then `steps` physics steps (MuJoCo integrates the motors at each, `add_motor`)."""
     data.ctrl[robot.actuators] = goal
-    model.actuator_forcerange[robot.actuators] = limits
-    robot.loads.update(model, data)
-    mujoco.mj_step(model, data, nstep=steps)
+    robot.loads.update(robot.model, data)
+    mujoco.mj_step(robot.model, data, nstep=steps)
 
 
 def floor_reach(leg: Leg) -> np.ndarray:
@@ -204,22 +244,24 @@ def add_beam(
 
 
 def add_motor(spec: mujoco.MjSpec, slot: str, motor: Motor) -> None:
-    """The slot's motor on its crank hinge: the velocity servo of `Motor` (control: the
-    speed goal in rad/s; `control_tick` sets its force range) and the rotor's inertia as
-    the hinge's armature."""
-    gain = motor.servo_gain
+    """The slot's motor on its crank hinge (`sim.robot.Motor`; control: the speed goal in
+    rad/s): its drive as an affine actuator clipped to ± stall (the supply), its back-EMF
+    as the hinge's damping and the rotor's inertia as its armature. MuJoCo integrates all
+    three at every physics step, implicitly in velocity."""
     spec.add_actuator(
         name=f"{slot}/motor",
         target=f"{slot}/crank",
         trntype=mujoco.mjtTrn.mjTRN_JOINT,
         gaintype=mujoco.mjtGain.mjGAIN_FIXED,
-        gainprm=[gain] + [0] * 9,
+        gainprm=[motor.drive_gain] + [0] * 9,
         biastype=mujoco.mjtBias.mjBIAS_AFFINE,
-        biasprm=[0, 0, -gain] + [0] * 7,
+        biasprm=[0, 0, -motor.drive_bias] + [0] * 7,
         forcelimited=1,
         forcerange=[-motor.stall_nm, motor.stall_nm],
     )
-    spec.joint(f"{slot}/crank").armature = motor.armature
+    crank = spec.joint(f"{slot}/crank")
+    crank.armature = motor.armature
+    crank.damping = [motor.back_emf_damping, 0.0, 0.0]  # linear damping (MuJoCo 4: 3 terms)
 
 
 def robot_model(
@@ -227,9 +269,12 @@ def robot_model(
     legs: dict[str, Leg],
     phases: dict[str, float],
     loads: LegLoads,
+    motor: Motor,
+    frame: Frame,
+    foot_layers: dict[str, int],
 ) -> RobotModel:
     """Returns the compiled model with where its parts are (names as both builders give
-    them)."""
+    them) and each foot's kinematic path (its leg's foot node on `foot_layers[slot]`)."""
 
     def ids(kind: mujoco.mjtObj, names: list[str]) -> np.ndarray:
         return np.array([mujoco.mj_name2id(model, kind, n) for n in names], dtype=np.int64)
@@ -246,6 +291,13 @@ def robot_model(
         start_phases=np.array([phases[s] for s in LEG_SLOTS], dtype=float),
         stroke_m=np.array([legs[s].stance_stroke() * UNIT_M for s in LEG_SLOTS]),
         loads=loads,
+        motor=motor,
+        foot_paths=np.stack(
+            [
+                np.array([world(p, foot_layers[s]) for p in legs[s].foot_path()])
+                for s, world in ((s, leg_frame(s, legs[s], frame)) for s in LEG_SLOTS)
+            ]
+        ),
     )
 
 

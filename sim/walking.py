@@ -103,6 +103,8 @@ class Walk:
         breaks: the robot cannot walk as built; reason says why ("" when it walks).
         timestep: the physics step the walk ran at (a diverging walk is retried finer).
         diverged: the simulation blew up even at the finest step.
+        foot_deviation_mm: the furthest any foot strayed from where its linkage puts it at
+            its crank's angle (`RobotModel.foot_deviation`): the pins' play along the leg.
         trace: per control tick: "t" (T,), "body" (T, 3) frame position, "contact"
             (T, 6) bool each leg touching the floor, "phase" (T, 6) radians, "qpos"
             (T, nq) the whole state's positions (to replay the walk).
@@ -130,6 +132,7 @@ class Walk:
     timestep: float = TIMESTEP_S
     diverged: bool = False
     model: mujoco.MjModel | None = field(default=None, repr=False)
+    foot_deviation_mm: float = math.nan
 
 
 def walk(
@@ -208,7 +211,8 @@ class _Records:
     Attributes:
         t: (T,) time; body: (T, 3) frame position; mat: (T, 9) frame orientation;
         phase: (T, 6) crank phases; qpos: (T, nq) the state; torque: (T, 6) motor torques;
-        limits: (T, 6, 2) their bounds; feet: (T, 6, 3) foot sites; frame: (T,) the frame
+        limited: (T, 6) each drive at its supply's limit; feet: (T, 6, 3) foot sites; frame:
+        (T,) the frame
         touches the floor; contact: (T, 6) each leg touches it; loads: (S, width) the
         model's load samples (`sim.robot_model.LegLoads`).
     """
@@ -219,7 +223,7 @@ class _Records:
     phase: np.ndarray
     qpos: np.ndarray
     torque: np.ndarray
-    limits: np.ndarray
+    limited: np.ndarray
     feet: np.ndarray
     frame: np.ndarray
     contact: np.ndarray
@@ -234,7 +238,7 @@ class _Records:
             phase=np.empty((ticks, 6)),
             qpos=np.empty((ticks, nq)),
             torque=np.empty((ticks, 6)),
-            limits=np.empty((ticks, 6, 2)),
+            limited=np.zeros((ticks, 6), dtype=bool),
             feet=np.empty((ticks, 6, 3)),
             frame=np.zeros(ticks, dtype=bool),
             contact=np.zeros((ticks, 6), dtype=bool),
@@ -298,27 +302,27 @@ class _Run:
 
     def _tick(self, pid: PhasePid) -> bool:
         """One control tick (`sim.robot_model.control_tick`): the gait's command as the
-        motors' speed goal, their torque limits at the speed they turn now."""
+        motors' speed goal."""
         d, motor, robot = self.data, self.motor, self.robot
         rpm = np.clip(pid.rpm(d.time, self.phases()), -motor.velocity_limit_rpm,
                       motor.velocity_limit_rpm)  # fmt: skip
-        limits = motor.torque_limits(d.qvel[robot.crank_dof])
-        control_tick(robot, d, rpm * (2 * math.pi / 60), limits, self.tick_steps)
+        control_tick(robot, d, rpm * (2 * math.pi / 60), self.tick_steps)
         # MuJoCo resets the state when accelerations blow up, and counts it as a warning.
         blown = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
         return not blown and bool(np.isfinite(d.qpos).all()) and abs(d.qpos[2]) < 10.0
 
     def _record(self, rec: _Records, tick: int) -> None:
-        """Keeps what the tick left: the state, the motors' torques and limits, contacts
-        (what needs the whole walk is computed from these at its end, `_result`)."""
-        m, d, robot = self.robot.model, self.data, self.robot
+        """Keeps what the tick left: the state, the motors' torques and whether their
+        drives are at the supply's limit, contacts (what needs the whole walk is computed
+        from these at its end, `_result`)."""
+        d, robot = self.data, self.robot
         rec.t[tick] = d.time
         rec.body[tick] = d.xpos[robot.frame_body]
         rec.mat[tick] = d.xmat[robot.frame_body]
         rec.phase[tick] = self.phases()
         rec.qpos[tick] = d.qpos
-        rec.torque[tick] = d.actuator_force[robot.actuators]
-        rec.limits[tick] = m.actuator_forcerange[robot.actuators]
+        rec.torque[tick] = robot.motor_torque(d)
+        rec.limited[tick] = robot.at_supply_limit(d)
         rec.feet[tick] = d.site_xpos[robot.foot_sites]
         touching = d.contact.geom[: d.ncon].ravel() if d.ncon else np.zeros(0, dtype=int)
         rec.frame[tick] = bool((touching == robot.frame_geom).any())
@@ -336,12 +340,8 @@ class _Run:
         turned = phases[-1] - self.phase0  # (6,) radians each crank turned
         turns = float(np.abs(turned).mean()) / (2 * math.pi)
         bound = 2 * float(self.robot.stroke_m.mean()) * turns
-        force, limits = rec.torque, rec.limits  # (T, 6), (T, 6, 2)
-        torque = np.abs(force) / self.motor.stall_nm
-        margin = 1e-3 * self.motor.stall_nm
-        saturated = ((force <= limits[..., 0] + margin) | (force >= limits[..., 1] - margin)).mean(
-            axis=0
-        )
+        torque = np.abs(rec.torque) / self.motor.stall_nm  # (T, 6)
+        saturated = rec.limited.mean(axis=0)
         sign = 1.0 if self.gait.speed_rpm >= 0 else -1.0
         errors = pid.errors(t[:, None], phases)  # (T, 6) the clock's lead on each leg
         lag = np.degrees(np.max(sign * errors, axis=0))  # behind the clock
@@ -349,6 +349,7 @@ class _Run:
         percentiles = tuple(float(v) for v in np.percentile(pins, [50, 95, 99, 100]))
         loops = self.robot.loads.loop_errors(rec.loads)
         loops = loops if loops.size else np.zeros(1)
+        deviation = self.robot.foot_deviation(phases, body, mats, rec.feet)
         frame_contact = float(np.mean(rec.frame))
         clearance = float(body[:, 2].min() - self.frame.height / 2)
         walk = Walk(
@@ -378,6 +379,7 @@ class _Run:
             },
             model=self.robot.model,
             timestep=self.settings.step,
+            foot_deviation_mm=float(deviation.max() * 1000),
         )
         reason = break_reason(walk, lag)
         return dataclasses.replace(walk, breaks=bool(reason), reason=reason)
