@@ -43,14 +43,26 @@ def check_angles(n_angles: int) -> int:
     return int(n_angles)
 
 
-def simulate(batch: LinkageBatch, n_angles: int = DEFAULT_ANGLES) -> Motion:
-    """Returns the motion of decoded linkages over n_angles crank angles (spec §3)."""
+def simulate(
+    batch: LinkageBatch, n_angles: int = DEFAULT_ANGLES, only: np.ndarray | None = None
+) -> Motion:
+    """Returns the motion of decoded linkages over n_angles crank angles (spec §3).
+
+    Args:
+        batch: the linkages (N).
+        n_angles: crank angles per turn, A.
+        only: the indices of the A angles to simulate (A' of them: the motion's columns);
+            each angle's positions are the same, bit for bit, as in the whole turn's.
+    """
     n_angles = check_angles(n_angles)
-    n = len(batch)
+    theta = kernels.crank_angles(n_angles, batch.mode == "legacy")
+    if only is not None:
+        theta = np.ascontiguousarray(theta[only])
+    n, a = len(batch), len(theta)
     motion = Motion(
-        positions=np.empty((n, N_NODES, n_angles, 2)),
-        valid=np.empty((n, n_angles), np.bool_),
-        beam_angles=np.full((n, MAX_BEAMS, n_angles), np.nan),
+        positions=np.empty((n, N_NODES, a, 2)),
+        valid=np.empty((n, a), np.bool_),
+        beam_angles=np.full((n, MAX_BEAMS, a), np.nan),
         foot=np.empty(n, np.int64),
     )
     kernels.simulate_batch(
@@ -58,7 +70,7 @@ def simulate(batch: LinkageBatch, n_angles: int = DEFAULT_ANGLES) -> Motion:
         batch.node_float,
         batch.beam_int,
         batch.n_beams,
-        n_angles,
+        theta,
         batch.mode == "legacy",
         motion.positions,
         motion.valid,

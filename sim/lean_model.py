@@ -20,7 +20,7 @@ models). It adds no weight and, reflected to the crank, under 0.1 % of the rotor
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -164,6 +164,7 @@ class LegStatics:
     pins: np.ndarray
     pivots: np.ndarray
     coupled: np.ndarray
+    _inverses: dict[int, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     @classmethod
     def of(cls, leg: Leg, coupled: list[int]) -> LegStatics:
@@ -196,10 +197,25 @@ class LegStatics:
             wrenches: (S, K, 3) the force (x, y, in the linkage's frame) and moment (about
                 the part's pivot, counter-clockwise) the pins exert on each coupled part.
         """
-        n_parts, n_pins = self.leg.n_parts, len(self.pins)
+        n_parts = self.leg.n_parts
         unique, index = np.unique(poses % self.leg.paths.shape[1], return_inverse=True)
-        nodes = self.leg.paths[:, unique] * UNIT_M  # (M, U, 2)
-        system = np.zeros((len(unique), 3 * n_parts, 2 * n_pins + 1))
+        missing = [int(u) for u in unique if int(u) not in self._inverses]
+        if missing:  # each pose's system is inverted once per leg
+            for pose, inverse in zip(missing, np.linalg.pinv(self._systems(missing)), strict=True):
+                self._inverses[pose] = inverse
+        inverses = np.stack([self._inverses[int(u)] for u in unique])
+        loads = np.zeros((len(poses), 3 * n_parts))
+        for k, part in enumerate(self.coupled):
+            loads[:, 3 * part : 3 * part + 3] = wrenches[:, k]
+        unknowns = np.einsum("sij,sj->si", inverses[index], loads)
+        return unknowns[:, :-1].reshape(len(poses), len(self.pins), 2), unknowns[:, -1]
+
+    def _systems(self, poses: list[int]) -> np.ndarray:
+        """Returns (U, 3P, 2J + 1) the balance of every moving part (force x, y, moment)
+        in the pins' forces and the motor's torque, at each pose."""
+        n_parts, n_pins = self.leg.n_parts, len(self.pins)
+        nodes = self.leg.paths[:, poses] * UNIT_M  # (M, U, 2)
+        system = np.zeros((len(poses), 3 * n_parts, 2 * n_pins + 1))
         for j, (node, hub, other) in enumerate(self.pins):
             for part, sign in ((other, 1.0), (hub, -1.0)):
                 if part < 0:
@@ -210,11 +226,7 @@ class LegStatics:
                 system[:, 3 * part + 2, 2 * j] = -sign * arm[:, 1]
                 system[:, 3 * part + 2, 2 * j + 1] = sign * arm[:, 0]
         system[:, 2, -1] = 1.0  # the motor's torque on the crank (part 0)
-        loads = np.zeros((len(poses), 3 * n_parts))
-        for k, part in enumerate(self.coupled):
-            loads[:, 3 * part : 3 * part + 3] = wrenches[:, k]
-        unknowns = np.einsum("sij,sj->si", np.linalg.pinv(system)[index], loads)
-        return unknowns[:, :-1].reshape(len(poses), n_pins, 2), unknowns[:, -1]
+        return system
 
     def pin_forces(self, poses: np.ndarray, wrenches: np.ndarray) -> np.ndarray:
         """Returns (S, J) each pin's force magnitude (N); arguments as `solve`."""

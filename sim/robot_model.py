@@ -209,9 +209,14 @@ def leg_frame(slot: str, leg: Leg, frame: Frame):
     facing = leg.facing()
 
     def world(node: np.ndarray, layer: int) -> np.ndarray:
+        """(..., 2) linkage points in modules -> (..., 3) frame coordinates (m)."""
         lateral = side * (frame.leg_plane + layer * LAYER_PITCH_M)
-        x, y = np.asarray(node) * UNIT_M
-        return axle + np.array([-facing * x, lateral, y])
+        node = np.asarray(node, dtype=float) * UNIT_M
+        out = np.empty((*node.shape[:-1], 3))
+        out[..., 0] = axle[0] + -facing * node[..., 0]
+        out[..., 1] = axle[1] + lateral
+        out[..., 2] = axle[2] + node[..., 1]
+        return out
 
     return world
 
@@ -293,10 +298,7 @@ def robot_model(
         loads=loads,
         motor=motor,
         foot_paths=np.stack(
-            [
-                np.array([world(p, foot_layers[s]) for p in legs[s].foot_path()])
-                for s, world in ((s, leg_frame(s, legs[s], frame)) for s in LEG_SLOTS)
-            ]
+            [leg_frame(s, legs[s], frame)(legs[s].foot_path(), foot_layers[s]) for s in LEG_SLOTS]
         ),
     )
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import statistics
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -25,6 +26,46 @@ carry it."""
 PIN_FORCE_LIMIT_N = 60.0
 """The 99th-percentile pin force above which a LEGO Technic pin joint is taken to fail
 (beams spread and the pin walks out); an estimate, see docs/walking.md."""
+
+
+@dataclass
+class BreakWatch:
+    """Says, while a walk of `ticks` control ticks goes on, when the break rules are
+    certain to call it broken whatever its remaining ticks do: the frame has dragged for
+    more than `FRAME_DRAG_SHARE` of the whole walk, a motor has been at its limit for
+    `STALL_SATURATED` of it with its leg `STALL_LAG_DEG` behind, or so many pin forces
+    exceed `PIN_FORCE_LIMIT_N` that the walk's 99th percentile must (numpy's linear
+    percentile of n values is above the limit once n - floor(0.99 (n - 1)) of them are).
+
+    Attributes:
+        ticks: the walk's planned control ticks; pins_total: its planned pin forces (the
+            load samples times the pins per sample).
+    """
+
+    ticks: int
+    pins_total: int
+    frame: int = 0
+    limited: np.ndarray = field(default_factory=lambda: np.zeros(6, dtype=np.int64))
+    lag_deg: np.ndarray = field(default_factory=lambda: np.zeros(6))
+    pins_over: int = 0
+
+    def add(self, frame: np.ndarray, limited: np.ndarray, lag_deg: np.ndarray, pins: np.ndarray):
+        """Takes the next ticks' records: frame (k,) and limited (k, 6) bool, the legs'
+        largest lag over them (6,) in degrees, and the pin forces they sampled (flat, N)."""
+        self.frame += int(frame.sum())
+        self.limited += limited.sum(axis=0)
+        self.lag_deg = np.maximum(self.lag_deg, lag_deg)
+        self.pins_over += int((pins > PIN_FORCE_LIMIT_N).sum())
+
+    def broken(self) -> bool:
+        """Whether the walk breaks, whatever its remaining ticks do."""
+        stalled = (self.lag_deg > STALL_LAG_DEG) & (self.limited >= STALL_SATURATED * self.ticks)
+        n = self.pins_total
+        return bool(
+            self.frame > FRAME_DRAG_SHARE * self.ticks
+            or stalled.any()
+            or (n > 0 and self.pins_over >= n - math.floor(0.99 * (n - 1)))
+        )
 
 
 def break_reason(walk: Walk, lag_deg: np.ndarray) -> str:

@@ -34,7 +34,7 @@ from linkevo.sim.robot import (
     Motor,
 )
 from linkevo.sim.robot_model import RobotModel, control_tick
-from linkevo.sim.walk_figures import break_reason, foot_slip, wrap_angle, yaw_of
+from linkevo.sim.walk_figures import BreakWatch, break_reason, foot_slip, wrap_angle, yaw_of
 
 MODELS = dict(
     zip(ROBOT_MODELS, ((build_lean_robot, LEAN_TIMESTEP_S), (build_robot, TIMESTEP_S)), strict=True)
@@ -48,6 +48,8 @@ MIN_TIMESTEP_S = 0.0005
 LOOP_ERROR_BOUND_MM = 2.0
 """The loop-closure error a walk stays below at the default step (the tests hold it)."""
 START_JITTER = {"heading_deg": 3.0, "position_mm": 5.0, "phase_deg": 3}
+BREAK_CHECK_TICKS = 25
+"""How often (control ticks, half a second) a walk that stops at its break checks."""
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,10 @@ class WalkSettings:
         sparse: solve the constraints with MuJoCo's sparse Jacobian instead of the dense
             one. The same walk to rounding (1e-12 m apart after 3 s on study legs), 1.3-1.5x
             faster on the lean model; walk maps use it, Table I's predictions are dense.
+        stop_at_break: end the walk once the break rules are certain to call it broken
+            (`sim.walk_figures.BreakWatch`, checked every `BREAK_CHECK_TICKS`); its figures
+            are then those of the stretch walked (the walking fitness's walks). A walk that
+            does not break is the same walk either way.
     """
 
     seconds: float = WALK_SECONDS
@@ -73,6 +79,7 @@ class WalkSettings:
     loads_every: int = 2
     reverse: bool = False
     sparse: bool = False
+    stop_at_break: bool = False
 
     @property
     def step(self) -> float:
@@ -105,6 +112,8 @@ class Walk:
         diverged: the simulation blew up even at the finest step.
         foot_deviation_mm: the furthest any foot strayed from where its linkage puts it at
             its crank's angle (`RobotModel.foot_deviation`): the pins' play along the leg.
+        stopped_s: where a walk with `stop_at_break` ended because it had broken (seconds
+            after the clock started), NaN when it ran its length.
         trace: per control tick: "t" (T,), "body" (T, 3) frame position, "contact"
             (T, 6) bool each leg touching the floor, "phase" (T, 6) radians, "qpos"
             (T, nq) the whole state's positions (to replay the walk).
@@ -133,6 +142,7 @@ class Walk:
     diverged: bool = False
     model: mujoco.MjModel | None = field(default=None, repr=False)
     foot_deviation_mm: float = math.nan
+    stopped_s: float = math.nan
 
 
 def walk(
@@ -229,6 +239,12 @@ class _Records:
     contact: np.ndarray
     loads: np.ndarray
 
+    def head(self, ticks: int, every: int) -> _Records:
+        """Returns the first `ticks` ticks' records (and their load samples, one every
+        `every` ticks)."""
+        rows = {f.name: getattr(self, f.name)[:ticks] for f in dataclasses.fields(self)}
+        return _Records(**{**rows, "loads": self.loads[: -(-ticks // every)]})
+
     @classmethod
     def empty(cls, ticks: int, samples: int, nq: int, width: int) -> _Records:
         return cls(
@@ -244,6 +260,33 @@ class _Records:
             contact=np.zeros((ticks, 6), dtype=bool),
             loads=np.empty((samples, width)),
         )
+
+
+class _Watch:
+    """A walk's break rules followed as it goes (`sim.walk_figures.BreakWatch`), with the
+    pin forces of the samples so far (computed once, kept for the walk's figures)."""
+
+    def __init__(self, ticks: int, samples: int) -> None:
+        self.samples = samples
+        self.rules = BreakWatch(ticks, 0)
+        self._ticks = 0
+        self._samples = 0
+        self._pins: list[np.ndarray] = []
+
+    def follow(self, rec: _Records, ticks: int, samples: int, pid: PhasePid, run: _Run) -> None:
+        """Takes the records up to `ticks` ticks and `samples` load samples."""
+        new = slice(self._ticks, ticks)
+        pins = run.robot.loads.pin_forces(rec.loads[self._samples : samples])
+        if self._samples == 0 and samples:
+            self.rules.pins_total = len(pins) // samples * self.samples
+        lag = run.lag_deg(pid, rec.t[new], rec.phase[new])
+        self.rules.add(rec.frame[new], rec.limited[new], lag, pins)
+        self._pins.append(pins)
+        self._ticks, self._samples = ticks, samples
+
+    def pins(self) -> np.ndarray:
+        """Every pin force over the samples followed (flat)."""
+        return np.concatenate(self._pins) if self._pins else np.zeros(0)
 
 
 class _Run:
@@ -288,14 +331,21 @@ class _Run:
         self.phase0 = self.phases()
         n_ticks = round(self.settings.seconds * self.gait.rate_hz)
         every = self.settings.loads_every
-        rec = _Records.empty(n_ticks, -(-n_ticks // every), m.nq, robot.loads.width)
+        samples = -(-n_ticks // every)
+        rec = _Records.empty(n_ticks, samples, m.nq, robot.loads.width)
+        watch = _Watch(n_ticks, samples) if self.settings.stop_at_break else None
         for tick in range(n_ticks):
             if not self._tick(pid):
                 return self._diverged()
             self._record(rec, tick)
             if tick % every == 0:
                 robot.loads.sample(m, d, rec.loads[tick // every])
-        return self._result(rec, pid, p0, yaw0)
+            done = tick + 1
+            if watch and (done % BREAK_CHECK_TICKS == 0 or done == n_ticks):
+                watch.follow(rec, done, -(-done // every), pid, self)
+                if watch.rules.broken() and done < n_ticks:
+                    return self._result(rec.head(done, every), pid, p0, yaw0, watch.pins())
+        return self._result(rec, pid, p0, yaw0, watch.pins() if watch else None)
 
     def phases(self) -> np.ndarray:
         return self.robot.start_phases + self.data.qpos[self.robot.crank_qpos]
@@ -329,7 +379,22 @@ class _Run:
         legs = self.geom_leg[touching]
         rec.contact[tick, legs[legs >= 0]] = True
 
-    def _result(self, rec: _Records, pid: PhasePid, p0: np.ndarray, yaw0: float) -> Walk:
+    def lag_deg(self, pid: PhasePid, t: np.ndarray, phases: np.ndarray) -> np.ndarray:
+        """Returns (6,) how far each leg fell behind the clock over ticks at t (T,) with
+        phases (T, 6), in degrees."""
+        sign = 1.0 if self.gait.speed_rpm >= 0 else -1.0
+        return np.degrees(np.max(sign * pid.errors(t[:, None], phases), axis=0))
+
+    def _result(
+        self,
+        rec: _Records,
+        pid: PhasePid,
+        p0: np.ndarray,
+        yaw0: float,
+        pins: np.ndarray | None = None,
+    ) -> Walk:
+        """The walk's figures from its records (`pins`: the pin forces when already
+        computed); a walk whose records end before its length stopped at its break."""
         body, mats = rec.body, rec.mat.reshape(-1, 3, 3)
         t, phases = rec.t, rec.phase  # (T,), (T, 6)
         heading = np.array([math.cos(yaw0), math.sin(yaw0)])
@@ -342,10 +407,8 @@ class _Run:
         bound = 2 * float(self.robot.stroke_m.mean()) * turns
         torque = np.abs(rec.torque) / self.motor.stall_nm  # (T, 6)
         saturated = rec.limited.mean(axis=0)
-        sign = 1.0 if self.gait.speed_rpm >= 0 else -1.0
-        errors = pid.errors(t[:, None], phases)  # (T, 6) the clock's lead on each leg
-        lag = np.degrees(np.max(sign * errors, axis=0))  # behind the clock
-        pins = self.robot.loads.pin_forces(rec.loads)
+        lag = self.lag_deg(pid, t, phases)
+        pins = self.robot.loads.pin_forces(rec.loads) if pins is None else pins
         percentiles = tuple(float(v) for v in np.percentile(pins, [50, 95, 99, 100]))
         loops = self.robot.loads.loop_errors(rec.loads)
         loops = loops if loops.size else np.zeros(1)
@@ -382,6 +445,11 @@ class _Run:
             foot_deviation_mm=float(deviation.max() * 1000),
         )
         reason = break_reason(walk, lag)
+        planned = round(self.settings.seconds * self.gait.rate_hz)
+        if len(t) < planned and reason:
+            stopped = len(t) / self.gait.rate_hz
+            reason += f" (stopped at {stopped:.1f} s of {self.settings.seconds:g})"
+            walk = dataclasses.replace(walk, stopped_s=stopped)
         return dataclasses.replace(walk, breaks=bool(reason), reason=reason)
 
     def _diverged(self) -> Walk:

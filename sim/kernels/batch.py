@@ -123,12 +123,13 @@ def decode_batch(genomes, legacy, ni, nf, bi, bf, n_beams, pos0):
 
 
 @numba.njit(parallel=True, **_BATCH)
-def simulate_batch(ni, nf, bi, n_beams, n_angles, legacy, positions, valid, bang, foot):
-    """Simulates decoded linkages: positions (N, 12, A, 2), valid (N, A), bang (N, 15, A).
+def simulate_batch(ni, nf, bi, n_beams, theta, legacy, positions, valid, bang, foot):
+    """Simulates decoded linkages at crank angles theta (A,) (`crank_angles`, or some of
+    them): positions (N, 12, A, 2), valid (N, A), bang (N, 15, A).
 
     Positions at failed angles are NaN.
     """
-    theta = crank_angles(n_angles, legacy)
+    n_angles = theta.shape[0]
     cos_t = np.cos(theta)
     sin_t = np.sin(theta)
     for i in numba.prange(ni.shape[0]):
