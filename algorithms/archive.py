@@ -155,6 +155,15 @@ class GridArchive:
         self.add(replace(elites, desc=np.asarray(desc, dtype=np.float64)))
         return len(elites) - len(self)
 
+    def incumbents(self, desc: np.ndarray) -> np.ndarray:
+        """Returns (N,) the elite's loss in the cell of each descriptor row (N, D), inf
+        where the cell is empty: what a child there must beat."""
+        cells, filled = self.cell_index(desc), self.cells
+        if not len(filled):
+            return np.full(len(cells), np.inf)
+        at = np.minimum(np.searchsorted(filled, cells), len(filled) - 1)
+        return np.where(filled[at] == cells, self.losses()[at], np.inf)
+
     def losses(self) -> np.ndarray:
         """Returns the (K,) losses of the elites, in `cells` order."""
         if not len(self):

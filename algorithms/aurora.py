@@ -113,6 +113,13 @@ class AuroraMapElites(MapElites):
             self.training_seconds += time.perf_counter() - started
         return self.encode(evaluation.foot_x, evaluation.foot_y)
 
+    def bar(self, genomes: np.ndarray, evaluation: Evaluation) -> np.ndarray:
+        """Returns MapElites' bar, inf before the first batch (whose encoding would train
+        the encoder; the archive is empty then anyway)."""
+        if self._iteration == 0:
+            return np.full(len(genomes), np.inf)
+        return super().bar(genomes, evaluation)
+
     def _survive(self, batch: Individuals, *, initial: bool) -> None:
         if not initial:
             self._last = self._no_training()

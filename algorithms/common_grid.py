@@ -34,6 +34,15 @@ class CommonGrid:
         cells = cell_index(bin_descriptors(desc[keep], self._space), self._space)
         np.fmin.at(self._best, cells, loss[keep])
 
+    def incumbents(self, desc: np.ndarray) -> np.ndarray:
+        """Returns (N,) the best loss told in the cell of each MAP-LIS descriptor row
+        (N, 2), inf where none (or where a row has no cell)."""
+        out = np.full(len(desc), np.inf)
+        keep = np.isfinite(desc).all(axis=1)
+        cells = cell_index(bin_descriptors(desc[keep], self._space), self._space)
+        out[keep] = np.nan_to_num(self._best[cells], nan=np.inf)
+        return out
+
     def coverage(self) -> float:
         """Returns the filled fraction of the grid."""
         return scoring.coverage(int(np.isfinite(self._best).sum()), self._space.n_cells)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from linkevo.algorithms.archive import GridArchive
+from linkevo.algorithms.common_grid import COMMON_SPACE
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.optimizer import BaseOptimizer
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
@@ -48,6 +49,14 @@ class MapElites(BaseOptimizer):
         """Returns the published descriptors (B, D) of this approach from the evaluation."""
         return evaluation.descriptors[self.approach]
 
+    def bar(self, genomes: np.ndarray, evaluation: Evaluation) -> np.ndarray:
+        """Returns (B,) the loss each genome must beat to enter its cell, of the archive
+        and of the common grid (inf where either is empty): at or above it, it changes
+        neither the repertoire nor any metric (`Optimizer.bar`)."""
+        own = self._archive.incumbents(self.descriptors_of(genomes, evaluation))
+        common = self._common.incumbents(evaluation.descriptors[COMMON_SPACE])
+        return np.minimum(own, common)
+
     def reindex(self, desc: np.ndarray) -> int:
         """Re-inserts every elite under new descriptors; returns how many were dropped.
 
@@ -77,6 +86,7 @@ class MapElites(BaseOptimizer):
             "mean_loss": float(np.mean(loss)),
             "coverage": self._archive.coverage(),
             "qd_score": self._archive.qd_score(self.qd_offset),
+            **self._walkers(loss),
         }
 
     def _columns(self) -> dict[str, np.ndarray]:

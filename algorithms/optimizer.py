@@ -11,7 +11,7 @@ from linkevo.algorithms.common_grid import COMMON_SPACE, CommonGrid
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.mutation import check_initial_sigma, initial_sigma, mutate, n_sigmas
 from linkevo.algorithms.rng_state import decode_rng, encode_rng
-from linkevo.algorithms.scoring import QD_OFFSETS, scalar_loss
+from linkevo.algorithms.scoring import QD_OFFSETS, WALKER_LOSS, scalar_loss
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import random_genomes
 from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES, evaluated_fitness
@@ -47,6 +47,11 @@ class Optimizer(Protocol):
 
     def metrics(self) -> dict[str, float]:
         """Returns evaluations, best_loss, mean_loss, coverage, qd_score (and extras)."""
+        ...
+
+    def bar(self, genomes: np.ndarray, evaluation: Evaluation) -> np.ndarray:
+        """Returns (B,) for each asked genome the single-objective loss it must get below
+        to change what the optimizer keeps or reports (inf: any loss might)."""
         ...
 
     def best(self) -> tuple[np.ndarray, float]:
@@ -195,6 +200,11 @@ class BaseOptimizer:
         """Returns the continuous descriptors (B, D) kept with each told genome."""
         raise NotImplementedError
 
+    def bar(self, genomes: np.ndarray, evaluation: Evaluation) -> np.ndarray:
+        """Returns (B,) inf: a population's survivors depend on the whole batch, so any
+        loss might change them (`Optimizer.bar`)."""
+        return np.full(len(genomes), np.inf)
+
     def metrics(self) -> dict[str, float]:
         """Returns iteration, evaluations, best_loss (best-ever), mean_loss (of the kept
         individuals), coverage, qd_score (the approach's own grid), common_coverage and
@@ -208,6 +218,13 @@ class BaseOptimizer:
             "common_coverage": self._common.coverage(),
             "common_qd_score": self._common.qd_score(self.qd_offset),
         }
+
+    def _walkers(self, cell_losses) -> dict[str, float]:
+        """Returns, for the walking fitness, how many cells (their best losses) hold a
+        walker (`scoring.WALKER_LOSS`); nothing for the path fitnesses."""
+        if self.fitness != "Fw":
+            return {}
+        return {"walkers": float(np.sum(np.asarray(cell_losses) <= WALKER_LOSS))}
 
     def best(self) -> tuple[np.ndarray, float]:
         """Returns the best-ever genome (56,) and its single-objective loss."""

@@ -56,7 +56,7 @@ class PopulationOptimizer(BaseOptimizer):
     def _summary(self) -> dict[str, float]:
         pop = self._population
         if pop is None:
-            return {"mean_loss": np.nan, "coverage": 0.0, "qd_score": 0.0}
+            return {"mean_loss": np.nan, "coverage": 0.0, "qd_score": 0.0, **self._walkers([])}
         loss = self._scalar(pop)
         space = DESCRIPTOR_SPACES[self.coverage_space]
         cells = cell_index(bin_descriptors(pop.desc, space), space)
@@ -65,6 +65,7 @@ class PopulationOptimizer(BaseOptimizer):
             "mean_loss": float(np.mean(loss)),
             "coverage": scoring.coverage(best.size, space.n_cells),
             "qd_score": scoring.qd_score(best, self.qd_offset),
+            **self._walkers(best),
         }
 
     def _state(self) -> dict[str, np.ndarray]:

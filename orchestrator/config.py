@@ -15,12 +15,15 @@ from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
     DEFAULT_BATCH,
+    DEFAULT_WALK_BATCH,
     MIN_ANGLES,
     MODES,
     SINGLE_FITNESSES,
     STUDY_APPROACHES,
     STUDY_EVALUATIONS,
+    STUDY_FITNESSES,
     TARGETS,
+    WALKING_FITNESS,
 )
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S
 
@@ -38,6 +41,8 @@ COUNT_LIMITS = {
     "evaluators_per_trial": 1024,
     "checkpoint_every": 1_000_000,
     "n_angles": 3600,
+    "walks": 10_000_000,
+    "walk_batch": 100_000,
 }
 """The largest value each count may take: counts are bounded before any work, so a slip
 of the finger (`trials=1000000000`) is refused rather than expanded."""
@@ -92,7 +97,14 @@ class GridConfig:
             approach's optimizer (`algorithms.make_optimizer`).
         walk_rerank: at the end of each trial, walk its K lowest-loss linkages that pass
             the physical checks on the simulated robot (flat floor) and log the best walker
-            (`workers.trial`, docs/walking.md); 0 (the default) walks none.
+            (`workers.trial`, docs/walking.md); 0 (the default) walks none. Path
+            fitnesses only.
+        walks: the budget of each walking trial (fitness "Fw"): candidates walked on the
+            simulated robot (`sim.walk_fitness`), >= 1 when "Fw" is among `fitnesses`,
+            else 0. `evaluations` does not apply to them (their guard is
+            `sim.study.CANDIDATES_PER_WALK` candidates per walk).
+        walk_batch: candidates per iteration (and initial population) of a walking
+            trial, >= 1 (`batch_size` is the path fitnesses').
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -112,7 +124,7 @@ class GridConfig:
 
     trials: int = STUDY_TRIALS
     approaches: tuple[str, ...] = STUDY_APPROACHES
-    fitnesses: tuple[str, ...] = SINGLE_FITNESSES
+    fitnesses: tuple[str, ...] = STUDY_FITNESSES
     evaluations: int = STUDY_EVALUATIONS
     batch_size: int = DEFAULT_BATCH
     mode: str = "paper"
@@ -122,6 +134,8 @@ class GridConfig:
     max_seconds: float | None = None
     options: dict[str, Any] = field(default_factory=dict)
     walk_rerank: int = 0
+    walks: int = 0
+    walk_batch: int = DEFAULT_WALK_BATCH
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -148,12 +162,15 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank` counts only when it is on, so grids without it keep their ids.
-        `trials` does not count: a trial's seed depends on its index, not on how many the
-        grid holds, so a grid with more trials extends one with fewer (`--resume`)."""
+        `walk_rerank` counts only when it is on, and `walks` and `walk_batch` only for a grid
+        with walking trials, so grids without them keep their ids. `trials` does not
+        count: a trial's seed depends on its index, not on how many the grid holds, so a
+        grid with more trials extends one with fewer (`--resume`)."""
         out = {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS and k != "trials"}
         if not out["walk_rerank"]:
             del out["walk_rerank"]
+        if WALKING_FITNESS not in self.fitnesses:
+            del out["walks"], out["walk_batch"]
         return out
 
 
@@ -236,6 +253,8 @@ def _validate(cfg: GridConfig) -> None:
     _check_int(cfg, "walk_rerank", 0)
     if cfg.walk_rerank > MAX_WALK_RERANK:
         raise _fail("walk_rerank", cfg.walk_rerank, f"allowed: 0 to {MAX_WALK_RERANK}")
+    _check_int(cfg, "walks", 0)
+    _check_int(cfg, "walk_batch", 1)
     _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)
     _check_number(cfg, "server_outage_s", 0.0, strict=True)
     if cfg.trial_cpus != "auto":
@@ -250,6 +269,12 @@ def _validate(cfg: GridConfig) -> None:
     _check_size(cfg)
     _check_choices(cfg, "approaches", APPROACHES, many=True)
     _check_choices(cfg, "fitnesses", SINGLE_FITNESSES, many=True)
+    walking = WALKING_FITNESS in cfg.fitnesses
+    if walking and cfg.walks < 1:
+        raise _fail("walks", cfg.walks, "allowed: an integer >= 1 with fitness Fw (walked "
+                    "candidates per trial, e.g. --set walks=2000)")  # fmt: skip
+    if not walking and cfg.walks:
+        raise _fail("walks", cfg.walks, 'allowed: 0 unless fitnesses holds "Fw"')
     _check_choices(cfg, "mode", MODES, many=False)
     _check_choices(cfg, "target", TARGETS, many=False)
     for key in ("experiment", "tracking_uri", "work_dir"):

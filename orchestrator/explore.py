@@ -147,6 +147,7 @@ def repertoire_view(
         "resolution": resolution,
         "drawn": len(cells) if drawn is None else min(drawn, len(cells)),
         "floors": floors,
+        "walk_s": walk_seconds(walks),
         "cells": cells,
     }
 
@@ -170,6 +171,15 @@ def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str]
         )
     }
     return floors, walked
+
+
+def walk_seconds(walks: pd.DataFrame | None) -> float | None:
+    """Returns how long a walk map's walks are (s): a `linkevo walkmap` walks 10 s (or its
+    --seconds), a walking trial's search walks `sim.walk_fitness.SEARCH_SECONDS`; None
+    without a walk map."""
+    if walks is None or walks.empty:
+        return None
+    return float(walks["seconds"].max())
 
 
 def best_view(views: list[dict]) -> int:

@@ -189,11 +189,12 @@ def _run_tasks(
     """The fan-out loop of `fan_out`: keeps `reservation.concurrent` trial tasks in flight
     and records each outcome as its task ends.
 
-    A trial with evaluator actors runs in a placement group of its own (its task and its
-    actors are placed together); one without is a plain task reserving `trial_cpus`, since
-    creating a group costs about 0.4 s. A trial whose task died with the machinery
-    (`RETRYABLE_ERRORS`: its worker, node or an evaluator actor lost) goes back to the
-    front of the queue, up to `max_retries` times.
+    A trial with evaluator actors runs in a placement group of its own: its task and its
+    actors packed on one node, or, for a walking trial, spread over the nodes (a walked
+    candidate is 0.2 core-seconds of work and a few kilobytes to send). One without is a
+    plain task reserving `trial_cpus`, since creating a group costs about 0.4 s. A trial
+    whose task died with the machinery (`RETRYABLE_ERRORS`: its worker, node or an
+    evaluator actor lost) goes back to the front of the queue, up to `max_retries` times.
     """
     import ray
     from ray.util.placement_group import placement_group, remove_placement_group
@@ -209,7 +210,10 @@ def _run_tasks(
             cell = pending.popleft()
             group = strategy = None
             if reservation.evaluators:
-                group = placement_group(reservation.bundles(), strategy="PACK")
+                spread = ctx.specs[cell.key].walking_trial  # its walks over the nodes
+                group = placement_group(
+                    reservation.bundles(), strategy="SPREAD" if spread else "PACK"
+                )
                 strategy = PlacementGroupSchedulingStrategy(
                     placement_group=group, placement_group_bundle_index=0
                 )

@@ -69,26 +69,35 @@ def check_store_holds_grid(record: Path, uri: str, grid: Grid) -> None:
 def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
     """Returns every trial's spec by key, checking each approach's options by building
     its optimizer once; raises ConfigError before any trial starts."""
+    from linkevo.sim.study import WALKING_FITNESS
     from linkevo.workers.trial_spec import TrialSpec, check_spec_options
 
     cfg = grid.config
     specs: dict[str, TrialSpec] = {}
     for cell in grid.cells:
+        settings = dict(
+            mode=cfg.mode,
+            seed=cell.seed,
+            target=cfg.target,
+            n_angles=cfg.n_angles,
+            checkpoint_every=cfg.checkpoint_every,
+            max_seconds=cfg.max_seconds,
+            options=dict(cfg.options.get(cell.approach, {})),
+        )
         try:
-            spec = TrialSpec(
-                approach=cell.approach,
-                fitness=cell.fitness,
-                evaluations=cfg.evaluations,
-                batch_size=cfg.batch_size,
-                mode=cfg.mode,
-                seed=cell.seed,
-                target=cfg.target,
-                n_angles=cfg.n_angles,
-                checkpoint_every=cfg.checkpoint_every,
-                max_seconds=cfg.max_seconds,
-                walk_rerank=cfg.walk_rerank,
-                options=dict(cfg.options.get(cell.approach, {})),
-            )
+            if cell.fitness == WALKING_FITNESS:
+                spec = TrialSpec.walking(
+                    cell.approach, cfg.walks, batch_size=cfg.walk_batch, **settings
+                )
+            else:
+                spec = TrialSpec(
+                    cell.approach,
+                    cell.fitness,
+                    cfg.evaluations,
+                    batch_size=cfg.batch_size,
+                    walk_rerank=cfg.walk_rerank,
+                    **settings,
+                )
             if cell.index == 0:
                 check_spec_options(spec)
         except ValueError as exc:

@@ -13,7 +13,7 @@ import numpy as np
 from linkevo.sim.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.physical import TOGGLE_DEG
 from linkevo.sim.robot import in_floor_order
-from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES
+from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.store import run_layout as layout
@@ -178,7 +178,7 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     from linkevo.sim.layers import layer_plan
     from linkevo.sim.lego import QuantiseError, quantise
 
-    fitness = fitness if fitness in SINGLE_FITNESSES else SINGLE_FITNESSES[0]
+    fitness = fitness if fitness in STUDY_FITNESSES else STUDY_FITNESSES[0]  # F_w: F_p
     try:
         q = quantise(genome, mode, fitness, n_angles)
     except QuantiseError as exc:

@@ -296,7 +296,7 @@ def _log(
     if picture and not frame.empty:
         from linkevo.workers.plots.walk_map import draw_walk_map
 
-        png = draw_walk_map(frame, trial, tmp / layout.WALK_MAP_PNG)
+        png = draw_walk_map(frame, trial.approach, trial.trial_key, tmp / layout.WALK_MAP_PNG)
         client.log_artifact(trial.run_id, str(png))
     walked = frame[frame["status"] == "walked"]
     for floor, part in walked.groupby("floor"):

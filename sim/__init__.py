@@ -36,6 +36,7 @@ _HOMES = {
     "Motion": "kinematics",
     "simulate": "kinematics",
     "FITNESSES": "study",
+    "PATH_FITNESSES": "study",
     "MODES": "study",
     "from_document": "linkage_doc",
     "to_document": "linkage_doc",

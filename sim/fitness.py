@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim.kernels import FP, FP2, FSL, FSL2
-from linkevo.sim.study import FITNESSES, TARGETS
+from linkevo.sim.study import PATH_FITNESSES, TARGETS
 
 FITNESS_CODES: dict[str, int] = {"Fp": FP, "Fsl": FSL, "Fp2": FP2, "Fsl2": FSL2}
 """Kernel code of each fitness name."""
@@ -104,6 +104,6 @@ def named_target(name: str = "D16") -> Target:
 
 def check_fitness(fitness: str) -> str:
     """Returns `fitness` if it is a known name, else raises ValueError naming the choices."""
-    if fitness not in FITNESSES:
-        raise ValueError(f"unknown fitness {fitness!r}; allowed: {', '.join(FITNESSES)}")
+    if fitness not in PATH_FITNESSES:
+        raise ValueError(f"unknown fitness {fitness!r}; allowed: {', '.join(PATH_FITNESSES)}")
     return fitness

@@ -145,15 +145,16 @@ def leg_from_genome(genome: np.ndarray, mode: str = "paper") -> Leg:
     Raises:
         LegError: when the linkage (as built and as evolved) does not turn a full turn.
     """
-    return _recipe_and_leg(genome, mode)[1]
+    return recipe_and_leg(genome, mode)[1]
 
 
 def leg_recipe(genome: np.ndarray, mode: str = "paper") -> LegRecipe:
     """Returns the recipe of `leg_from_genome`'s leg; raises as it does."""
-    return _recipe_and_leg(genome, mode)[0]
+    return recipe_and_leg(genome, mode)[0]
 
 
-def _recipe_and_leg(genome: np.ndarray, mode: str) -> tuple[LegRecipe, Leg]:
+def recipe_and_leg(genome: np.ndarray, mode: str = "paper") -> tuple[LegRecipe, Leg]:
+    """Returns `leg_recipe`'s recipe and `leg_from_genome`'s leg at once; raises as they do."""
     genome = np.asarray(genome, dtype=np.float64).reshape(1, -1)
     note = ""
     try:

@@ -42,11 +42,14 @@ class Fitness:
         name: the spelling in configs, tags and tables ("Fp").
         label: the spelling in figures ("F_p").
         two_objective: the variant a multi-objective approach evaluates ("Fp2").
+        walks: the loss comes from walking the robot (`sim.walk_fitness`), not from the
+            2-D kernel; its budget is walked candidates.
     """
 
     name: str
     label: str
     two_objective: str
+    walks: bool = False
 
 
 APPROACH_TABLE: tuple[Approach, ...] = (
@@ -61,6 +64,7 @@ APPROACH_TABLE: tuple[Approach, ...] = (
 FITNESS_TABLE: tuple[Fitness, ...] = (
     Fitness("Fp", "F_p", "Fp2"),
     Fitness("Fsl", "F_sl", "Fsl2"),
+    Fitness("Fw", "F_w", "Fw2", walks=True),
 )
 
 APPROACH: dict[str, Approach] = {a.name: a for a in APPROACH_TABLE}
@@ -79,9 +83,19 @@ MULTI_OBJECTIVE: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.mul
 
 FITNESS: dict[str, Fitness] = {f.name: f for f in FITNESS_TABLE}
 SINGLE_FITNESSES: tuple[str, ...] = tuple(FITNESS)
-"""The fitness functions a trial optimises ("Fp", "Fsl")."""
+"""The fitness functions a trial optimises ("Fp", "Fsl", "Fw")."""
 FITNESSES: tuple[str, ...] = (*SINGLE_FITNESSES, *(f.two_objective for f in FITNESS_TABLE))
-"""Every fitness `sim.evaluating` computes: the two and their two-objective variants."""
+"""Every fitness and its two-objective variant, in the study's order."""
+PATH_FITNESSES: tuple[str, ...] = (
+    *(f.name for f in FITNESS_TABLE if not f.walks),
+    *(f.two_objective for f in FITNESS_TABLE if not f.walks),
+)
+"""The fitnesses of the foot path that `sim.evaluating` computes ("Fp", "Fsl", "Fp2",
+"Fsl2")."""
+WALKING_FITNESS = "Fw"
+"""The walking fitness: a trial's loss from its candidates walked on the robot."""
+STUDY_FITNESSES: tuple[str, ...] = tuple(f.name for f in FITNESS_TABLE if not f.walks)
+"""The study's two fitness functions (the paper's F_p and F_sl)."""
 MODES: tuple[str, ...] = ("paper", "legacy")
 """The simulation's modes (spec: paper by default, legacy as the published code)."""
 TARGETS: tuple[str, ...] = ("D16", "D24")
@@ -96,6 +110,13 @@ DEFAULT_ANGLES = 40
 """Crank angles simulated per turn (the study's 40)."""
 MIN_ANGLES = 3
 """The fewest crank angles a trial accepts: a path needs three points to have a shape."""
+DEFAULT_WALK_BATCH = 32
+"""Candidates per iteration of a walking trial: enough to keep a few evaluator actors busy
+(2-D rejections and repeated legs cost no walk), few enough that a budget of walks is met
+closely."""
+CANDIDATES_PER_WALK = 100
+"""A walking trial's guard: it ends after this many candidates per walk in its budget,
+should its search stop proposing legs that can be walked."""
 
 
 ROBOTS: tuple[str, ...] = ("first", "modified")
@@ -112,6 +133,11 @@ def label(name: str) -> str:
 def is_map_elites(approach: str) -> bool:
     """Returns True for the MAP-Elites approaches."""
     return approach in MAP_ELITES
+
+
+def walks(fitness: str) -> bool:
+    """Returns True for a fitness whose loss comes from walking (F_w and F_w2)."""
+    return fitness in (WALKING_FITNESS, FITNESS[WALKING_FITNESS].two_objective)
 
 
 def is_pareto(approach: str) -> bool:

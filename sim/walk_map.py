@@ -24,7 +24,7 @@ import numpy as np
 
 from linkevo.sim.leg import LegError, LegRecipe, leg_recipe
 from linkevo.sim.robot import FLOORS, WALK_SECONDS
-from linkevo.sim.walking import WalkSettings, walk
+from linkevo.sim.walking import Walk, WalkSettings, walk
 
 WALK_MAP_STEP_S = 0.004
 """A walk-map walk's physics step, twice Table I's: it ranks cells as Table I's walks do
@@ -44,9 +44,10 @@ COLUMNS = (
     "seconds",
 )
 """A walk-map row, per cell and floor. status: "walked", "not buildable" (no whole-module
-rounding of the linkage turns; walked only with `as_evolved`), or "failed" (the reason is
-the error)."""
-STATUSES = frozenset({"walked", "not buildable", "failed"})
+rounding of the linkage turns; walked only with `as_evolved`), "not walked" (the walking
+fitness walks no second floor for a leg that broke on the first, `sim.walk_fitness`), or
+"failed" (the reason is the error)."""
+STATUSES = frozenset({"walked", "not buildable", "not walked", "failed"})
 """Every status a walk-map row may have."""
 
 
@@ -104,11 +105,11 @@ def build_cells(batch: CellBatch) -> list[BuiltCell]:
         try:
             recipe = leg_recipe(genome, batch.mode)
         except LegError as exc:
-            rows = [_row(base, f, "walked", breaks=True, reason=str(exc)) for f in batch.floors]
+            rows = [map_row(base, f, "walked", breaks=True, reason=str(exc)) for f in batch.floors]
         except Exception as exc:  # recorded per cell, the batch goes on
-            rows = [_row(base, f, "failed", reason=_error(exc)) for f in batch.floors]
+            rows = [map_row(base, f, "failed", reason=error_text(exc)) for f in batch.floors]
         if recipe is not None and recipe.note and not batch.as_evolved:
-            rows = [_row(base, f, "not buildable", reason=recipe.note) for f in batch.floors]
+            rows = [map_row(base, f, "not buildable", reason=recipe.note) for f in batch.floors]
             recipe = None
         out.append(BuiltCell(int(cell), batch.floors, recipe=recipe, rows=rows))
     return out
@@ -127,29 +128,18 @@ def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
         try:
             leg = recipe.leg()
         except Exception as exc:  # recorded per leg, the batch goes on
-            out[key] = [_row(base, f, "failed", reason=_error(exc), leg=kind) for f in batch.floors]
+            out[key] = [
+                map_row(base, f, "failed", reason=error_text(exc), leg=kind) for f in batch.floors
+            ]
             continue
         rows = []
         for floor in batch.floors:
             try:
                 w = walk(leg, FLOORS[floor], settings=settings)
             except Exception as exc:  # recorded per leg and floor
-                rows.append(_row(base, floor, "failed", reason=_error(exc), leg=kind))
+                rows.append(map_row(base, floor, "failed", reason=error_text(exc), leg=kind))
                 continue
-            rows.append(
-                _row(
-                    base,
-                    floor,
-                    "walked",
-                    distance=w.distance_m * 100,
-                    breaks=w.breaks,
-                    reason=w.reason,
-                    leg=kind,
-                    bound=w.bound_m * 100,
-                    torque=w.torque_p95,
-                    pins=w.pin_force_n[2],
-                )
-            )
+            rows.append(walked_row(base, floor, w, kind))
         out[key] = rows
     return out
 
@@ -255,7 +245,23 @@ def walk_map_frame(rows: list[dict]):
     )
 
 
-def _row(
+def walked_row(base: dict, floor: str, w: Walk, leg: str) -> dict:
+    """Returns the row of a walk on `floor` (`leg`: "LEGO build" or "as evolved")."""
+    return map_row(
+        base,
+        floor,
+        "walked",
+        distance=w.distance_m * 100,
+        breaks=w.breaks,
+        reason=w.reason,
+        leg=leg,
+        bound=w.bound_m * 100,
+        torque=w.torque_p95,
+        pins=w.pin_force_n[2],
+    )
+
+
+def map_row(
     base: dict,
     floor: str,
     status: str,
@@ -268,6 +274,7 @@ def _row(
     torque: float = math.nan,
     pins: float = math.nan,
 ) -> dict:
+    """Returns a row (`COLUMNS`) from `base` (its cell and seconds) and the figures."""
     return {
         **base,
         "floor": floor,
@@ -282,5 +289,6 @@ def _row(
     }
 
 
-def _error(exc: Exception) -> str:
+def error_text(exc: Exception) -> str:
+    """The row's reason for an error: its type and message."""
     return f"{type(exc).__name__}: {exc}"

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from linkevo.workers.evaluators import Evaluator
+from linkevo.workers.evaluators import Evaluator, Stateless
 
 RAY_MODULES = frozenset(
     {
@@ -32,7 +32,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.xdist_group("ray"))
 
 
-class CrashingEvaluator:
+class CrashingEvaluator(Stateless):
     """Evaluates normally, then raises on call number `fail_at` (a crash mid-trial)."""
 
     def __init__(self, inner: Evaluator, fail_at: int) -> None:
@@ -40,11 +40,11 @@ class CrashingEvaluator:
         self.calls = 0
         self.fail_at = fail_at
 
-    def submit(self, genomes: np.ndarray):
+    def submit(self, genomes: np.ndarray, bar=None):
         self.calls += 1
         if self.calls == self.fail_at:
             raise RuntimeError("evaluator crashed")
-        return self.inner.submit(genomes)
+        return self.inner.submit(genomes, bar)
 
     def __call__(self, genomes: np.ndarray):
         return self.submit(genomes)()

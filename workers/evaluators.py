@@ -1,9 +1,9 @@
-"""Provides the in-process evaluator and the resolution of a trial's target."""
+"""Provides the Evaluator protocol, the in-process evaluator and `make_evaluator`."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Protocol
+from collections.abc import Callable, Mapping
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -14,24 +14,107 @@ from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.result_pool import ResultPool
 from linkevo.workers.trial_spec import resolve_target
 
+if TYPE_CHECKING:
+    from linkevo.workers.trial_spec import TrialSpec
+
 Pending = Callable[[], Evaluation]
 """A submitted batch: calling it waits for and returns its Evaluation."""
+Bar = Callable[[np.ndarray, Evaluation], np.ndarray]
+"""The optimizer's bar (`algorithms.Optimizer.bar`): genomes (B, 56) and their 2-D
+evaluation -> (B,) the loss each must get below to count."""
 
 
 class Evaluator(Protocol):
-    """Evaluates a batch of genomes for a trial."""
+    """Evaluates a batch of genomes for a trial, and keeps what the trial's checkpoint
+    needs of it (a walking trial's walk log; nothing for the path fitnesses)."""
 
-    def submit(self, genomes: np.ndarray) -> Pending:
+    def submit(self, genomes: np.ndarray, bar: Bar | None = None) -> Pending:
         """Starts evaluating genomes (B, 56); the returned Pending gives the Evaluation,
-        rows in input order. Bad genomes raise here, before any work starts."""
+        rows in input order. Bad genomes raise here, before any work starts. An
+        evaluator whose cost depends on how much of a candidate it must settle uses `bar`
+        (the walking one); the others ignore it."""
         ...
 
     def __call__(self, genomes: np.ndarray) -> Evaluation:
         """Returns the evaluation of genomes (B, 56): `submit(genomes)()`."""
         ...
 
+    def metrics(self) -> dict[str, float]:
+        """Returns the evaluator's own running metrics (the walks of a walking trial)."""
+        ...
 
-class LocalEvaluator:
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Returns the evaluator's state as npz-safe arrays, for the trial's checkpoint."""
+        ...
+
+    def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
+        """Restores `state_dict`'s output."""
+        ...
+
+    def close(self) -> None:
+        """Releases what it holds (actors)."""
+        ...
+
+
+class Stateless:
+    """An evaluator with no metrics or state of its own (the path fitnesses')."""
+
+    def metrics(self) -> dict[str, float]:
+        """Returns no metrics."""
+        return {}
+
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """Returns no state."""
+        return {}
+
+    def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
+        """Takes nothing."""
+
+    def close(self) -> None:
+        """Holds nothing (a subclass with actors kills them)."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def make_evaluator(
+    spec: TrialSpec,
+    actors: int = 0,
+    cpus_per_actor: float = 1.0,
+    placement_group: object = None,
+) -> Evaluator:
+    """Returns the evaluator a trial needs: in this process (`actors` = 0) or on `actors`
+    evaluator actors of the running Ray instance (placed in `placement_group`'s last
+    bundles); a walking trial's (`workers.walk_evaluator`) for fitness F_w."""
+    if spec.walking_trial:
+        from linkevo.workers.walk_evaluator import WalkingEvaluator
+
+        walkers = None
+        if actors:
+            from linkevo.workers.ray_evaluator import ActorWalkers
+
+            walkers = ActorWalkers.start(actors, cpus_per_actor, placement_group)
+        two = spec.eval_fitness != spec.fitness
+        return WalkingEvaluator(spec.mode, spec.n_angles, two_objective=two, walkers=walkers)
+    if not actors:
+        return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
+    from linkevo.workers.ray_evaluator import ActorPoolEvaluator
+
+    return ActorPoolEvaluator.start(
+        n_actors=actors,
+        cpus_per_actor=cpus_per_actor,
+        fitness=spec.eval_fitness,
+        mode=spec.mode,
+        target=spec.target,
+        n_angles=spec.n_angles,
+        placement_group=placement_group,  # type: ignore[arg-type]
+    )
+
+
+class LocalEvaluator(Stateless):
     """Evaluates in this process with `sim.evaluating` (numba threads over the batch).
 
     Results go into reused buffers (`workers.result_pool`): a buffer is written again
@@ -66,7 +149,8 @@ class LocalEvaluator:
             out=out,
         )
 
-    def submit(self, genomes: np.ndarray) -> Pending:
-        """Evaluates genomes (B, 56) now, in this thread; the Pending returns the result."""
+    def submit(self, genomes: np.ndarray, bar: Bar | None = None) -> Pending:
+        """Evaluates genomes (B, 56) now, in this thread; the Pending returns the result
+        (`bar` is not needed)."""
         evaluation = self(genomes)
         return lambda: evaluation

@@ -1,7 +1,9 @@
-"""Provides evaluator actors and the evaluator that splits a batch across K of them.
+"""Provides evaluator actors: the evaluator that splits a batch across K of them, and the
+walkers of a walking trial (`ActorWalkers`).
 
 Each actor gets its part of a batch as a task argument and returns its Evaluation, both
-through Ray's object store (docs/grid.md, "Evaluator actors").
+through Ray's object store (docs/grid.md, "Evaluator actors"). A walking trial's actors
+take its candidates one task each, so that the one that finishes first takes the next.
 """
 
 from __future__ import annotations
@@ -15,7 +17,32 @@ from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import validate_genomes
-from linkevo.workers.evaluators import LocalEvaluator, Pending
+from linkevo.sim.walk_fitness import CandidateWalk, walk_candidate
+from linkevo.workers.evaluators import Bar, LocalEvaluator, Pending, Stateless
+
+
+def actor_options(
+    worker: type, n_actors: int, cpus: float, placement_group: PlacementGroup | None
+) -> list:
+    """Returns how to start each of `n_actors` actors of `worker` reserving `cpus` each.
+
+    With a placement group, actor i takes bundle `len(bundles) - n_actors + i` (the last
+    n_actors bundles; an earlier bundle may hold the trial task itself). An actor whose
+    node dies is restarted once, and its task retried once."""
+    remote_cls = ray.remote(worker)
+    first_bundle = 0
+    if placement_group is not None:
+        first_bundle = len(placement_group.bundle_specs) - n_actors
+    out = []
+    for i in range(n_actors):
+        strategy = None
+        if placement_group is not None:
+            strategy = PlacementGroupSchedulingStrategy(
+                placement_group=placement_group, placement_group_bundle_index=first_bundle + i
+            )
+        out.append(remote_cls.options(num_cpus=cpus, max_restarts=1, max_task_retries=1,
+                                      scheduling_strategy=strategy))  # fmt: skip
+    return out
 
 
 class EvaluatorWorker:
@@ -40,7 +67,7 @@ class EvaluatorWorker:
         return self._evaluate(genomes)
 
 
-class ActorPoolEvaluator:
+class ActorPoolEvaluator(Stateless):
     """Evaluates a batch by splitting it by index across K evaluator actors.
 
     The batch is cut into K contiguous parts (one per actor), evaluated concurrently and
@@ -74,33 +101,16 @@ class ActorPoolEvaluator:
         With a placement group, actor i takes bundle `len(bundles) - n_actors + i` (the
         last n_actors bundles; an earlier bundle may hold the trial task itself).
         """
-        remote_cls = ray.remote(EvaluatorWorker)
-        first_bundle = 0
-        if placement_group is not None:
-            first_bundle = len(placement_group.bundle_specs) - n_actors
-        actors = []
-        for i in range(n_actors):
-            strategy = None
-            if placement_group is not None:
-                strategy = PlacementGroupSchedulingStrategy(
-                    placement_group=placement_group,
-                    placement_group_bundle_index=first_bundle + i,
-                )
-            options = remote_cls.options(
-                num_cpus=cpus_per_actor,
-                max_restarts=1,
-                max_task_retries=1,
-                scheduling_strategy=strategy,
+        actors = [
+            options.remote(
+                fitness=fitness,
+                mode=mode,
+                target=target,
+                n_angles=n_angles,
+                threads=max(1, int(cpus_per_actor)),
             )
-            actors.append(
-                options.remote(
-                    fitness=fitness,
-                    mode=mode,
-                    target=target,
-                    n_angles=n_angles,
-                    threads=max(1, int(cpus_per_actor)),
-                )
-            )
+            for options in actor_options(EvaluatorWorker, n_actors, cpus_per_actor, placement_group)
+        ]
         return cls(actors)
 
     @property
@@ -112,8 +122,9 @@ class ActorPoolEvaluator:
         """Returns the evaluation of `genomes` (B, 56), rows in input order: `submit()()`."""
         return self.submit(genomes)()
 
-    def submit(self, genomes: np.ndarray) -> Pending:
-        """Sends the parts of `genomes` (B, 56) to the actors and returns at once.
+    def submit(self, genomes: np.ndarray, bar: Bar | None = None) -> Pending:
+        """Sends the parts of `genomes` (B, 56) to the actors and returns at once (`bar`
+        is not needed).
 
         The returned Pending (call it once) waits for the parts and returns the Evaluation,
         rows in input order. One batch is in flight at a time: submitting before the last
@@ -151,3 +162,52 @@ class ActorPoolEvaluator:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class WalkWorker:
+    """Builds and walks a walking trial's candidates; runs as a Ray actor."""
+
+    def walk(
+        self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float
+    ) -> tuple[CandidateWalk, str]:
+        """Returns the candidate's walk (`sim.walk_fitness.walk_candidate`) and this
+        actor's Ray node."""
+        node = ray.get_runtime_context().get_node_id()
+        return walk_candidate(genome, mode, known, bar), node
+
+
+class ActorWalkers:
+    """A walking trial's candidates built and walked on its evaluator actors, a task each
+    (`ray.util.ActorPool`: an actor takes the next candidate as soon as it is free).
+
+    Args:
+        actors: `WalkWorker` actors.
+    """
+
+    def __init__(self, actors: list[ray.actor.ActorHandle]):
+        if not actors:
+            raise ValueError("ActorWalkers needs at least one actor")
+        self._actors = list(actors)
+
+    @classmethod
+    def start(
+        cls, n_actors: int, cpus_per_actor: float, placement_group: PlacementGroup | None = None
+    ) -> ActorWalkers:
+        """Returns walkers on `n_actors` new actors (placed as `actor_options` says)."""
+        options = actor_options(WalkWorker, n_actors, cpus_per_actor, placement_group)
+        return cls([o.remote() for o in options])
+
+    def walk(self, genomes: np.ndarray, mode: str, known: frozenset[str], bars: np.ndarray):
+        """Starts every candidate's walk now; yields each (walk, node) in order."""
+        from ray.util import ActorPool
+
+        known_ref = ray.put(known)
+        pool = ActorPool(self._actors)
+        items = list(zip(genomes, bars.tolist(), strict=True))
+        return pool.map(lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1]), items)
+
+    def close(self) -> None:
+        """Kills the actors (idempotent)."""
+        for actor in self._actors:
+            ray.kill(actor, no_restart=True)
+        self._actors = []

@@ -40,24 +40,28 @@ class NullRecorder:
 
 
 class ProgressRecorder:
-    """Shows a tqdm progress bar on stderr: evaluations, best loss, coverage.
+    """Shows a tqdm progress bar on stderr: evaluations (or walks), best loss, coverage.
 
     Args:
-        total: the evaluation budget.
+        total: the budget: evaluations, or a walking trial's walks.
+        unit: the bar's unit ("eval" or "walk").
+        counter: the metric the bar follows ("evaluations" or "walks").
         disable: hide the bar.
     """
 
-    def __init__(self, total: int, disable: bool = False) -> None:
-        self._bar = tqdm(
-            total=total, unit="eval", unit_scale=True, file=sys.stderr, disable=disable
-        )
+    def __init__(
+        self, total: int, unit: str = "eval", counter: str = "evaluations", disable: bool = False
+    ) -> None:
+        self._counter = counter
+        self._bar = tqdm(total=total, unit=unit, unit_scale=True, file=sys.stderr, disable=disable)
 
     def log_iteration(self, iteration: int, metrics: dict[str, float]) -> None:
-        """Moves the bar to the evaluations done and shows best loss and coverage (a row
-        of end-of-trial measures alone, such as `path_diversity`, leaves it as it is)."""
-        if "evaluations" not in metrics:
+        """Moves the bar to the evaluations (walks) done and shows best loss and coverage
+        (a row of end-of-trial measures alone, such as `path_diversity`, leaves it as it
+        is)."""
+        if self._counter not in metrics:
             return
-        self._bar.n = int(metrics["evaluations"])
+        self._bar.n = int(metrics[self._counter])
         self._bar.set_postfix(
             best=f"{metrics['best_loss']:.3f}", coverage=f"{metrics['coverage']:.3f}", refresh=False
         )

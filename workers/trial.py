@@ -11,6 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from linkevo.algorithms import Optimizer
 from linkevo.sim import decode, simulate
@@ -42,9 +43,14 @@ from linkevo.workers.store.run_layout import (
     METRICS_FILE,
     RESULT_FILE,
     SETTINGS_FILE,
+    WALK_LOG,
+    WALK_MAP,
+    WALK_MAP_PNG,
     WALK_RERANK,
 )
+from linkevo.workers.store.tables import bin_columns
 from linkevo.workers.trial_spec import TrialSpec, build_optimizer, resolve_target
+from linkevo.workers.walk_evaluator import WalkLog
 
 FLOAT32_COLUMNS: tuple[str, ...] = ("foot_x", "foot_y")
 """Repertoire columns stored as float32: the foot paths, for drawing and inspection, are
@@ -99,7 +105,12 @@ def _spec_doc(spec: TrialSpec) -> dict[str, object]:
 
 
 def _resume(
-    spec: TrialSpec, optimizer: Optimizer, log: MetricsCsv, recorder: Recorder, folder: Path
+    spec: TrialSpec,
+    optimizer: Optimizer,
+    evaluator: Evaluator,
+    log: MetricsCsv,
+    recorder: Recorder,
+    folder: Path,
 ) -> bool:
     checkpoint = load_checkpoint(folder)
     if checkpoint is None:
@@ -107,7 +118,7 @@ def _resume(
     saved = dict(checkpoint.spec)
     mine = _spec_doc(spec)
     # The budget and wall-clock limit may grow on resume; everything else must match.
-    for key in ("evaluations", "max_seconds", "checkpoint_every"):
+    for key in ("evaluations", "walks", "max_seconds", "checkpoint_every"):
         saved.pop(key, None)
         mine.pop(key, None)
     path = folder / CHECKPOINT_FILE
@@ -120,6 +131,7 @@ def _resume(
         )
     try:
         optimizer.load_state_dict(checkpoint.state)
+        evaluator.load_state_dict(checkpoint.state)
     except (KeyError, ValueError, TypeError, IndexError, AttributeError, RuntimeError) as exc:
         problem = f"missing entry {exc}" if isinstance(exc, KeyError) else str(exc)
         raise CheckpointError(path, f"its search state does not load: {problem}") from exc
@@ -131,7 +143,8 @@ def _resume(
 def _checkpoint(
     spec: TrialSpec, state: dict[str, np.ndarray], optimizer: Optimizer, rows: int, folder: Path
 ) -> None:
-    """Saves `state` (taken after a tell) with the metrics rows so far, and the encoder."""
+    """Saves `state` (the optimizer's and the evaluator's, taken after a tell) with the
+    metrics rows so far, and the encoder."""
     save_checkpoint(folder, Checkpoint(state, rows, _spec_doc(spec)))
     _write_torch_state(optimizer, folder / ENCODER_PT)
 
@@ -199,6 +212,24 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
     return float(distance[best])
 
 
+def write_walk_tables(log: WalkLog, view: dict[str, np.ndarray], spec: TrialSpec, out_dir: Path):
+    """Writes a walking trial's walk log (`walks.parquet`: every candidate it built) and,
+    for a repertoire, the walk map of its cells (`walkmap.parquet` and `walkmap.png`, as
+    `linkevo walkmap` writes them: explorer, pull and report read them alike)."""
+    from linkevo.workers.plots.walk_map import draw_walk_map
+
+    write_parquet_atomic(out_dir / WALK_LOG, log.table())
+    bins = bin_columns(list(view))
+    if not bins:
+        return
+    frame = log.walk_map(view["cell"], np.asarray(view["genome"], dtype=np.float64))
+    cells = pd.DataFrame({"cell": view["cell"], **{b: view[b] for b in bins}})
+    frame = frame.merge(cells, on="cell", how="left")
+    write_parquet_atomic(out_dir / WALK_MAP, {c: frame[c].to_numpy() for c in frame.columns})
+    title = f"{spec.approach} F_w, seed {spec.seed}"
+    draw_walk_map(frame, spec.approach, title, out_dir / WALK_MAP_PNG)
+
+
 def run_trial(
     spec: TrialSpec,
     evaluator: Evaluator,
@@ -236,7 +267,7 @@ def run_trial(
     optimizer = build_optimizer(spec)
     log = MetricsCsv(out_dir / METRICS_FILE)
     folder = out_dir / CHECKPOINT_DIR
-    if not (resume and _resume(spec, optimizer, log, recorder, folder)):
+    if not (resume and _resume(spec, optimizer, evaluator, log, recorder, folder)):
         log.reset()
         (folder / CHECKPOINT_FILE).unlink(missing_ok=True)  # nothing else it did not write
     write_json_atomic(
@@ -251,7 +282,7 @@ def run_trial(
     )
     laps = _Laps()
     stopped_by = _search(spec, optimizer, evaluator, recorder, log, folder, laps, start)
-    best_loss, metrics = _finish(spec, optimizer, recorder, out_dir)
+    best_loss, metrics = _finish(spec, optimizer, evaluator, recorder, out_dir)
     result = TrialResult(
         spec=spec,
         out_dir=out_dir,
@@ -309,12 +340,17 @@ def _search(
 
     An iteration's bookkeeping runs while the next batch is being evaluated: a remote
     evaluator computes meanwhile (docs/grid.md, "Bookkeeping overlap"). ask() leaves what
-    metrics() reads unchanged; the checkpoint state is taken right after tell().
+    metrics() reads unchanged; the evaluator's metrics and the checkpoint state are taken
+    right after tell(). A walking trial's budget is its walks (`TrialSpec.walks`), with
+    `evaluations` a guard.
     """
 
-    def bookkeeping(iteration: int, state: dict[str, np.ndarray] | None) -> None:
-        """Records iteration's metrics and saves the checkpoint state taken after its tell."""
-        metrics = optimizer.metrics()
+    def bookkeeping(
+        iteration: int, state: dict[str, np.ndarray] | None, own: dict[str, float]
+    ) -> None:
+        """Records iteration's metrics (the optimizer's, then the evaluator's `own`) and
+        saves the checkpoint state taken after its tell."""
+        metrics = optimizer.metrics() | own
         log.append(metrics)
         recorder.log_iteration(iteration, metrics)
         laps.lap("record")
@@ -322,12 +358,17 @@ def _search(
             _checkpoint(spec, state, optimizer, iteration, folder)
             laps.lap("checkpoint")
 
-    deferred: tuple[int, dict[str, np.ndarray] | None] | None = None
+    def budget_left() -> bool:
+        if optimizer.evaluations + spec.batch_size > spec.evaluations:
+            return False
+        return not spec.walking_trial or evaluator.metrics()["walks"] < spec.walks
+
+    deferred: tuple[int, dict[str, np.ndarray] | None, dict[str, float]] | None = None
     try:
-        while optimizer.evaluations + spec.batch_size <= spec.evaluations:
+        while budget_left():
             genomes = optimizer.ask()
             laps.lap("ask")
-            pending = evaluator.submit(genomes)
+            pending = evaluator.submit(genomes, bar=optimizer.bar)
             laps.lap("evaluate")
             if deferred is not None:
                 done, deferred = deferred, None
@@ -337,7 +378,8 @@ def _search(
             optimizer.tell(genomes, evaluation)
             laps.lap("tell")
             due = optimizer.iteration % spec.checkpoint_every == 0
-            deferred = (optimizer.iteration, optimizer.state_dict() if due else None)
+            state = optimizer.state_dict() | evaluator.state_dict() if due else None
+            deferred = (optimizer.iteration, state, evaluator.metrics())
             if spec.max_seconds is not None and time.monotonic() - start >= spec.max_seconds:
                 return "max_seconds"
         return "budget"
@@ -347,14 +389,17 @@ def _search(
 
 
 def _finish(
-    spec: TrialSpec, optimizer: Optimizer, recorder: Recorder, out_dir: Path
+    spec: TrialSpec, optimizer: Optimizer, evaluator: Evaluator, recorder: Recorder, out_dir: Path
 ) -> tuple[float, dict]:
     """Writes the end-of-trial files, records the final measures (path diversity; the best
     walker with `walk_rerank`); returns the best loss kept and the last metrics."""
     folder = out_dir / CHECKPOINT_DIR
-    _checkpoint(spec, optimizer.state_dict(), optimizer, optimizer.iteration, folder)
+    state = optimizer.state_dict() | evaluator.state_dict()
+    _checkpoint(spec, state, optimizer, optimizer.iteration, folder)
     best_loss, view = _write_final(spec, optimizer, out_dir)
-    metrics = optimizer.metrics()
+    if spec.walking_trial:
+        write_walk_tables(evaluator.log, view, spec, out_dir)  # type: ignore[attr-defined]
+    metrics = optimizer.metrics() | evaluator.metrics()
     metrics["path_diversity"] = (
         path_diversity(view["foot_x"], view["foot_y"], view["loss"]) if view else math.nan
     )

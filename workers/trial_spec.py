@@ -13,13 +13,16 @@ import numpy as np
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import (
     APPROACHES,
+    CANDIDATES_PER_WALK,
     DEFAULT_ANGLES,
     DEFAULT_BATCH,
+    DEFAULT_WALK_BATCH,
     MIN_ANGLES,
     MODES,
     MULTI_OBJECTIVE,
     SINGLE_FITNESSES,
     TARGETS,
+    WALKING_FITNESS,
     evaluated_fitness,
 )
 
@@ -56,6 +59,10 @@ class TrialSpec:
         options: approach-specific settings passed to `algorithms.make_optimizer`.
         walk_rerank: walk this many of the final lowest-loss linkages that pass the physical
             checks on the simulated robot (`rerank_by_walking`); 0: none.
+        walks: the budget of a walking trial (fitness "Fw"): candidates walked on the
+            physics (`sim.walk_fitness`); the trial ends once it has walked this many, or
+            after `evaluations` candidates, a guard (`CANDIDATES_PER_WALK` per walk when
+            built with `walking`). 0 for the path fitnesses.
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -73,6 +80,18 @@ class TrialSpec:
     max_seconds: float | None = None
     options: dict = field(default_factory=dict)
     walk_rerank: int = 0
+    walks: int = 0
+
+    @classmethod
+    def walking(cls, approach: str, walks: int, **settings: object) -> TrialSpec:
+        """Returns a walking trial ("Fw") of `walks` walked candidates, `DEFAULT_WALK_BATCH`
+        candidates per iteration and at most `CANDIDATES_PER_WALK` per walk (unless
+        `batch_size` or `evaluations` say otherwise)."""
+        if not _is_int(walks) or walks < 1:
+            raise TrialSpecError(f"walks must be a positive integer, got {walks!r}")
+        settings.setdefault("batch_size", DEFAULT_WALK_BATCH)
+        settings.setdefault("evaluations", max(walks * CANDIDATES_PER_WALK, settings["batch_size"]))
+        return cls(approach, WALKING_FITNESS, walks=walks, **settings)  # type: ignore[arg-type]
 
     def __post_init__(self) -> None:
         def fail(message: str) -> None:
@@ -97,6 +116,13 @@ class TrialSpec:
             fail(f"n_angles must be an integer >= {MIN_ANGLES}, got {self.n_angles!r}")
         if not _is_int(self.walk_rerank) or self.walk_rerank < 0:
             fail(f"walk_rerank must be an integer >= 0, got {self.walk_rerank!r}")
+        if self.fitness == WALKING_FITNESS:
+            if not _is_int(self.walks) or self.walks < 1:
+                fail(f"walks must be a positive integer for fitness Fw, got {self.walks!r}")
+            if self.walk_rerank:
+                fail("walk_rerank is for the path fitnesses: an Fw trial walks every candidate")
+        elif self.walks != 0:
+            fail(f"walks = {self.walks!r} is for fitness Fw only (this trial is {self.fitness})")
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
             fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
         if self.max_seconds is not None and not (
@@ -113,6 +139,11 @@ class TrialSpec:
             resolve_target(self.target)
         except ValueError as exc:
             fail(str(exc))
+
+    @property
+    def walking_trial(self) -> bool:
+        """Whether the trial's loss comes from walking (fitness "Fw")."""
+        return self.fitness == WALKING_FITNESS
 
     @property
     def eval_fitness(self) -> str:

@@ -17,8 +17,7 @@ import ray
 from mlflow.entities import Param, Run
 from mlflow.tracking import MlflowClient
 
-from linkevo.workers.evaluators import LocalEvaluator
-from linkevo.workers.ray_evaluator import ActorPoolEvaluator
+from linkevo.workers.evaluators import Evaluator, make_evaluator
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, patiently, use_quick_http
@@ -44,8 +43,9 @@ SPEC_PARAMS: tuple[str, ...] = (
     "n_angles",
     "target",
 )
-"""The TrialSpec fields logged as params of every trial run. The seed is a tag only: as a
-param, the MLflow UI's charts would plot it as a number (`3900000000.00000`)."""
+"""The TrialSpec fields logged as params of every trial run (and `walks`, a walking
+trial's). The seed is a tag only: as a param, the MLflow UI's charts would plot it as a
+number (`3900000000.00000`)."""
 
 
 @dataclass(frozen=True)
@@ -189,10 +189,11 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         lambda: client.create_run(job.experiment_id, run_name=job.trial_key, tags=job.tags())
     ).info.run_id
     spec_values = asdict(job.spec)
-    params = [Param(k, str(spec_values[k])) for k in SPEC_PARAMS]
+    names = SPEC_PARAMS + (("walks",) if job.spec.walking_trial else ())
+    params = [Param(k, str(spec_values[k])) for k in names]
     wait(lambda: client.log_batch(run_id, params=params))
     start = time.monotonic()
-    pool: ActorPoolEvaluator | None = None
+    evaluator: Evaluator | None = None
     recorder = MlflowRecorder(client, run_id, outage_s=job.outage_s)
     try:
         out_dir = Path(job.out_dir)
@@ -200,17 +201,12 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         spec = job.spec
         if job.evaluators == 0:
             numba.set_num_threads(min(job.threads, numba.config.NUMBA_NUM_THREADS))
-            evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
-        else:
-            evaluator = pool = ActorPoolEvaluator.start(
-                n_actors=job.evaluators,
-                cpus_per_actor=job.cpus_per_evaluator,
-                fitness=spec.eval_fitness,
-                mode=spec.mode,
-                target=spec.target,
-                n_angles=spec.n_angles,
-                placement_group=ray.util.get_current_placement_group(),
-            )
+        evaluator = make_evaluator(
+            spec,
+            actors=job.evaluators,
+            cpus_per_actor=job.cpus_per_evaluator,
+            placement_group=ray.util.get_current_placement_group() if job.evaluators else None,
+        )
         result = run_trial(spec, evaluator, recorder, out_dir, resume=True)
         wait(lambda: client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by))
     except ServerLost:
@@ -226,8 +222,8 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         wait(lambda: end_run(client, run_id, "FAILED", message))
         return outcome_of(wait(lambda: client.get_run(run_id)), time.monotonic() - start)
     finally:
-        if pool is not None:
-            pool.close()
+        if evaluator is not None:
+            evaluator.close()
     if wait(lambda: client.get_run(run_id)).info.status == "RUNNING":
         wait(lambda: client.set_terminated(run_id, "FINISHED"))
         # MLflow holds the finished trial's files now; the local copy (checkpoint

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
-from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, MIN_ANGLES, MODES
+from linkevo.sim.study import DEFAULT_ANGLES, MIN_ANGLES, MODES, PATH_FITNESSES
 
 if TYPE_CHECKING:
     import numpy as np
@@ -21,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Decode, simulate and score genomes (N, 56); write the results as npz.",
     )
     ev.add_argument("genomes", type=Path, help="a .npy file holding an (N, 56) float array")
-    ev.add_argument("--fitness", choices=FITNESSES, default="Fp", help="loss to compute")
+    ev.add_argument("--fitness", choices=PATH_FITNESSES, default="Fp", help="loss to compute")
     ev.add_argument("--mode", choices=MODES, default="paper", help="spec mode")
     ev.add_argument("--target", default="D16", help="D16 (default), D24 or a JSON target file")
     ev.add_argument(

@@ -7,17 +7,24 @@ import json
 import os
 import tempfile
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
 from linkevo.sim.study import (
     APPROACHES,
+    CANDIDATES_PER_WALK,
     DEFAULT_ANGLES,
     DEFAULT_BATCH,
+    DEFAULT_WALK_BATCH,
     MIN_ANGLES,
     MODES,
     SINGLE_FITNESSES,
+    WALKING_FITNESS,
 )
 from linkevo.workers.store.run_layout import CHECKPOINT_DIR, METRICS_FILE
+
+if TYPE_CHECKING:
+    from linkevo.workers.trial_spec import TrialSpec
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,10 +40,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--approach", required=True, help=f"one of {', '.join(APPROACHES)}")
     parser.add_argument("--fitness", required=True, help=f"one of {', '.join(SINGLE_FITNESSES)}")
     parser.add_argument(
-        "--evaluations", required=True, type=int, help="evaluation budget (>= batch size)"
+        "--evaluations",
+        type=int,
+        default=None,
+        help="evaluation budget (>= batch size); required but for --fitness Fw, where it "
+        f"is a guard (default: {CANDIDATES_PER_WALK} candidates per walk)",
     )
     parser.add_argument(
-        "--batch-size", type=int, default=DEFAULT_BATCH, help="children per iteration"
+        "--walks",
+        type=int,
+        default=None,
+        help="--fitness Fw: the budget in candidates walked on the simulated robot",
+    )
+    parser.add_argument(
+        "--batch-size",
+        type=int,
+        default=None,
+        help=f"children per iteration (default: {DEFAULT_BATCH}; Fw: {DEFAULT_WALK_BATCH})",
     )
     parser.add_argument("--mode", default="paper", help=f"one of {', '.join(MODES)}")
     parser.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
@@ -97,38 +117,65 @@ def check_out_dir(out: Path, resume: bool) -> None:
 
 def handle(args: argparse.Namespace) -> int:
     """Validates everything, runs the trial, prints where the results are."""
-    from linkevo.workers.evaluators import LocalEvaluator
+    from linkevo.workers.evaluators import make_evaluator
     from linkevo.workers.recorders import ProgressRecorder
     from linkevo.workers.trial import run_trial
+
+    spec = trial_spec(args)
+    check_out_dir(args.out, args.resume)
+    walking = spec.walking_trial
+    recorder = ProgressRecorder(
+        spec.walks if walking else spec.evaluations,
+        unit="walk" if walking else "eval",
+        counter="walks" if walking else "evaluations",
+        disable=args.no_progress,
+    )
+    try:
+        with make_evaluator(spec) as evaluator:
+            result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
+    finally:
+        recorder.close()
+    spent = f"{result.evaluations} evaluations"
+    if walking:
+        spent = f"{int(result.metrics['walks'])} walks ({result.evaluations} candidates)"
+    print(
+        f"{spec.approach} {spec.fitness}: best loss {result.best_loss:.4f} after {spent} "
+        f"({result.iterations} iterations, {result.seconds:.1f} s, stopped by "
+        f"{result.stopped_by}); files in {args.out}"
+    )
+    return 0
+
+
+def trial_spec(args: argparse.Namespace) -> TrialSpec:
+    """Returns the trial the arguments describe, checked (`CliError` naming what is wrong)."""
     from linkevo.workers.trial_spec import TrialSpec, build_optimizer
 
+    settings = dict(
+        mode=args.mode,
+        seed=args.seed,
+        target=args.target,
+        n_angles=args.n_angles,
+        checkpoint_every=args.checkpoint_every,
+        max_seconds=args.max_seconds,
+        options=parse_options(args.option),
+    )
+    if args.batch_size is not None:
+        settings["batch_size"] = args.batch_size
     try:
-        spec = TrialSpec(
-            approach=args.approach,
-            fitness=args.fitness,
-            evaluations=args.evaluations,
-            batch_size=args.batch_size,
-            mode=args.mode,
-            seed=args.seed,
-            target=args.target,
-            n_angles=args.n_angles,
-            checkpoint_every=args.checkpoint_every,
-            max_seconds=args.max_seconds,
-            options=parse_options(args.option),
-        )
+        if args.fitness == WALKING_FITNESS:
+            if args.walks is None:
+                raise CliError("--fitness Fw needs --walks N: its budget in walked candidates")
+            if args.evaluations is not None:
+                settings["evaluations"] = args.evaluations
+            spec = TrialSpec.walking(args.approach, args.walks, **settings)
+        else:
+            if args.walks is not None:
+                raise CliError(f"--walks is for --fitness Fw only (this trial is {args.fitness})")
+            if args.evaluations is None:
+                raise CliError(f"--fitness {args.fitness} needs --evaluations N")
+            settings.setdefault("batch_size", DEFAULT_BATCH)
+            spec = TrialSpec(args.approach, args.fitness, args.evaluations, **settings)
         build_optimizer(spec)
     except (ValueError, TypeError) as exc:  # an approach's options, checked by the optimizer
         raise CliError(str(exc)) from exc
-    check_out_dir(args.out, args.resume)
-    evaluator = LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
-    recorder = ProgressRecorder(spec.evaluations, disable=args.no_progress)
-    try:
-        result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
-    finally:
-        recorder.close()
-    print(
-        f"{spec.approach} {spec.fitness}: best loss {result.best_loss:.4f} after "
-        f"{result.evaluations} evaluations ({result.iterations} iterations, "
-        f"{result.seconds:.1f} s, stopped by {result.stopped_by}); files in {args.out}"
-    )
-    return 0
+    return spec

@@ -22,7 +22,7 @@ from linkevo.sim.reference.linkage import (
     distance,
     simulate_linkage,
 )
-from linkevo.sim.study import FITNESSES
+from linkevo.sim.study import PATH_FITNESSES
 
 
 def angle_error(motion: Motion, mode: str) -> float:
@@ -151,8 +151,8 @@ def evaluate_reference(
     n_angles: int = 40,
 ) -> Evaluation:
     """Returns the Evaluation of genomes (N, 56), one linkage at a time (as `sim.evaluating`)."""
-    if fitness not in FITNESSES:
-        raise ValueError(f"fitness must be one of {FITNESSES}, got {fitness!r}")
+    if fitness not in PATH_FITNESSES:
+        raise ValueError(f"fitness must be one of {PATH_FITNESSES}, got {fitness!r}")
     check_mode(mode)
     if isinstance(n_angles, bool) or not isinstance(n_angles, int) or n_angles < 2:
         raise ValueError(f"n_angles must be an integer >= 2, got {n_angles!r}")

@@ -85,7 +85,7 @@ def only_angle_zero(builder) -> np.ndarray:
 
 
 @pytest.mark.parametrize("mode", sim.MODES)
-@pytest.mark.parametrize("fitness", sim.FITNESSES)
+@pytest.mark.parametrize("fitness", sim.PATH_FITNESSES)
 def test_linkage_valid_only_at_angle_zero_gets_finite_losses(builder, mode, fitness):
     genome = only_angle_zero(builder)[None]
     ev = sim.evaluate(genome, fitness, mode)

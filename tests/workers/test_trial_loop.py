@@ -16,7 +16,7 @@ import pytest
 from linkevo.sim.linkage_doc import from_document
 from linkevo.sim.path_diversity import path_diversity
 from linkevo.workers.checkpoint import CheckpointError
-from linkevo.workers.evaluators import LocalEvaluator
+from linkevo.workers.evaluators import LocalEvaluator, Stateless
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.store.artifacts import read_npz
 from linkevo.workers.trial import run_trial
@@ -59,7 +59,7 @@ def evaluator_for(spec: TrialSpec) -> LocalEvaluator:
     return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
 
 
-class WatchingEvaluator:
+class WatchingEvaluator(Stateless):
     """Notes how many iterations the recorder holds at each submit and each collect."""
 
     def __init__(self, inner: LocalEvaluator, recorder: ListRecorder) -> None:
@@ -68,9 +68,9 @@ class WatchingEvaluator:
         self.at_submit: list[int] = []
         self.at_collect: list[int] = []
 
-    def submit(self, genomes: np.ndarray):
+    def submit(self, genomes: np.ndarray, bar=None):
         self.at_submit.append(len(self.recorder.iterations))
-        pending = self.inner.submit(genomes)
+        pending = self.inner.submit(genomes, bar)
 
         def collect():
             self.at_collect.append(len(self.recorder.iterations))

@@ -21,16 +21,16 @@ BROKEN = ListedColormap(["#e34a33"])
 """Cells whose robot breaks, in one red."""
 
 
-def draw_walk_map(frame: pd.DataFrame, trial, path: Path) -> Path:
+def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> Path:
     """Draws the walk map (`sim.walk_map.COLUMNS` rows with the cells' bins) to a PNG at
     `path`, atomically, and returns the path.
 
     Args:
         frame: a row per cell and floor.
-        trial: the repertoire trial (`orchestrator.explore.TrialRun`): approach and key.
+        approach: the repertoire's approach (its grid); name: the trial, for the title.
     """
     bins = bin_columns(frame.columns)
-    space = space_of(trial.approach, len(bins))
+    space = space_of(approach, len(bins))
     floors = in_floor_order(frame["floor"].unique())
     walked = frame[frame["status"] == "walked"]
     top = walked.loc[~walked["breaks"], "mean_distance_cm"]
@@ -56,11 +56,12 @@ def draw_walk_map(frame: pd.DataFrame, trial, path: Path) -> Path:
         ax.tick_params(labelsize=6)
     bar = fig.add_axes((0.9, 0.18, 0.015, 0.64))
     colour_bar = fig.colorbar(shown, cax=bar, extend="both")
+    seconds = float(frame["seconds"].max()) if len(frame) else 10.0
     colour_bar.set_label(
-        "distance in 10 s, cm (brighter is further; backwards is darkest)", fontsize=6
+        f"distance in {seconds:g} s, cm (brighter is further; backwards is darkest)", fontsize=6
     )
     colour_bar.ax.tick_params(labelsize=6)
-    fig.suptitle(f"{trial.trial_key}: walk map (simulated robot, one walk per cell)", fontsize=9)
+    fig.suptitle(f"{name}: walk map (simulated robot, one walk per cell)", fontsize=9)
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format="png", dpi=130)
     return path

@@ -64,8 +64,12 @@ REPERTOIRE = "repertoire.parquet"
 POPULATION = "population.parquet"
 WALK_MAP = "walkmap.parquet"
 """A repertoire trial's walk map: a row per walked cell and floor (`sim.walk_map.COLUMNS`
-plus the cell's bins), logged by `linkevo walkmap`."""
+plus the cell's bins), logged by `linkevo walkmap`, or by a walking trial (fitness F_w)
+itself."""
 WALK_MAP_PNG = "walkmap.png"
+WALK_LOG = "walks.parquet"
+"""A walking trial's walk log: a row per candidate it built (its stage, leg key, node,
+seconds and each floor's figures; `workers.walk_evaluator.WalkLog`)."""
 WALK_RERANK = "walk_rerank.parquet"
 """A trial's re-ranking walks (grid key `walk_rerank`): its K best linkages walked."""
 BEST_WALKER = "best_walker.json"
