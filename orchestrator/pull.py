@@ -9,17 +9,18 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from linkevo.sim.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.physical import TOGGLE_DEG
 from linkevo.sim.robot import in_floor_order
-from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES
+from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES, WALKING_FITNESS
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_json_atomic, write_text_atomic
 from linkevo.workers.store.linkages import SourceLinkage
-from linkevo.workers.store.runs import RunStore
+from linkevo.workers.store.runs import NotFound, RunStore
 
 SHEET_COLUMNS = (
     "beam",
@@ -204,15 +205,22 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
 
 
 def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
-    """Returns the pulled cell's rows of its trial's walk map (`linkevo walkmap`), per floor
-    (distance, breaks, reason), or {} when the cell was not walked."""
-    if source.cell is None or not source.run_id:
+    """Returns the pulled cell's rows of its trial's walk map (`linkevo walkmap`, or a
+    walking trial's own), per floor (distance, breaks, reason); for a walking trial's best
+    linkage, its rows of the trial's walk log; {} when it was not walked."""
+    if not source.run_id:
         return {}
     with tempfile.TemporaryDirectory() as tmp:
-        walks = store.walk_map(source.run_id, Path(tmp))
-    if walks is None:
-        return {}
-    rows = walks[(walks["cell"] == source.cell) & (walks["status"] == "walked")]
+        if source.cell is not None:
+            walks = store.walk_map(source.run_id, Path(tmp))
+            if walks is None:
+                return {}
+            rows = walks[walks["cell"] == source.cell]
+        elif source.fitness == WALKING_FITNESS:
+            rows = _logged_walks(store, source, Path(tmp))
+        else:
+            return {}
+    rows = rows[rows["status"] == "walked"]
     order = in_floor_order(rows["floor"])
     rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")
     return {
@@ -226,6 +234,26 @@ def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
     }
 
 
+def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataFrame:
+    """Returns a walking trial's rows (a walk map's columns) of its best linkage, from
+    its walk log (`walks.parquet`); none when the log lacks it."""
+    try:
+        log = pd.read_parquet(store.download(source.run_id, layout.WALK_LOG, tmp))
+    except NotFound:
+        log = pd.DataFrame({"genome": []})
+    genome = from_document(source.document)[0]
+    match = [i for i, g in enumerate(log["genome"]) if np.array_equal(g, genome)]
+    rows = []
+    for i in match[-1:]:
+        for floor in ("flat", "carpet"):
+            own = [c for c in log.columns if c.startswith(f"{floor}_")]
+            rows.append(
+                {"floor": floor, **{c.removeprefix(f"{floor}_"): log[c].iloc[i] for c in own}}
+            )
+    return pd.DataFrame(rows, columns=["floor", "status", "mean_distance_cm", "breaks",
+                                       "reason", "seconds"])  # fmt: skip
+
+
 def walk_line(walks: dict[str, dict]) -> str:
     """Returns the predicted walks in one line: the distance per floor, and breaks."""
     return (
@@ -234,7 +262,7 @@ def walk_line(walks: dict[str, dict]) -> str:
             + (f", breaks ({w['reason']})" if w["breaks"] else "")
             for floor, w in walks.items()
         )
-        + " (simulated robot, `linkevo walkmap`)"
+        + " (simulated robot: the trial's walk map or walks)"
     )
 
 

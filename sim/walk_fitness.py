@@ -58,6 +58,9 @@ NO_LEG_LOSS = 2000.0
 """A floor's loss when the candidate has no LEGO leg that turns (or its build failed)."""
 REJECTED_LOSS = 3000.0
 """A floor's loss when the candidate fails the 2-D checks, plus its grade (`rejected_loss`)."""
+SOUND_BELOW = BROKEN_LOSS / 2
+"""An F_w loss below this is a sound walk's (no robot walks 5 m in 10 s, backwards or
+before it breaks); at or above it the robot broke or was never walked."""
 STAGES: tuple[str, ...] = ("walked", "cached", "rejected", "no_lego_build", "no_turn", "failed")
 """Where a candidate's evaluation ended: walked on the physics; its leg walked before in the
 trial (its rows reused); rejected by the 2-D checks; no whole-module rounding turns; the

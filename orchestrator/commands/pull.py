@@ -104,12 +104,16 @@ def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
     the design found. Buildable is `sim.physical`'s verdict (it turns fully, no toggle,
     transmission angles above the limit).
 
+    A walking trial (F_w) offers its best linkage when it walks without breaking: its
+    loss is minus its worse floor's distance, so the lowest is the best walker.
+
     Raises:
         CliError: no trial offers a buildable design.
     """
     from linkevo.orchestrator.pull import checks_line
     from linkevo.sim.linkage_doc import from_document, to_document
-    from linkevo.sim.study import REPERTOIRE_APPROACHES
+    from linkevo.sim.study import REPERTOIRE_APPROACHES, WALKING_FITNESS
+    from linkevo.sim.walk_fitness import SOUND_BELOW
     from linkevo.workers.store.linkages import LinkageRef, list_cells, load_source
 
     found: tuple[float, str, str] | None = None
@@ -119,6 +123,13 @@ def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
         if found is not None and loss >= found[0]:
             break
         key = run.data.tags.get(layout.TRIAL_KEY, run_id)
+        if run.data.tags.get(layout.FITNESS) == WALKING_FITNESS:  # its best is its best walker
+            if loss >= SOUND_BELOW:
+                passed_over.append(f"{key}: no walker that does not break (loss {loss:.6g})")
+                continue
+            what = f"{key}'s best walker (run {run_id}), {-loss:.1f} cm in 10 s on its worse floor"
+            found = (loss, run_id, what)
+            break
         genome, mode = from_document(load_source(store, LinkageRef(run_id)).document)
         checks = to_document(genome, mode)["checks"]
         if checks["buildable"]:
