@@ -132,6 +132,7 @@ class BaseOptimizer:
         self._pending: tuple[np.ndarray, np.ndarray] | None = None
         self._best: Individuals | None = None
         self._common = CommonGrid()
+        self._initial: np.ndarray | None = None
 
     @property
     def eval_fitness(self) -> str:
@@ -148,11 +149,22 @@ class BaseOptimizer:
         """Completed ask/tell rounds (the initial population is round 1)."""
         return self._iteration
 
+    def seed_with(self, genomes: np.ndarray) -> None:
+        """Makes the first batch these genomes (K, 56) instead of random ones (a warm
+        start from an earlier repertoire; its size is theirs)."""
+        if self._iteration:
+            raise RuntimeError("seed_with() before the first ask() only")
+        self._initial = np.array(genomes, dtype=np.float64).reshape(-1, 56)
+
     def ask(self) -> np.ndarray:
-        """Returns the next batch, (B, 56): random genomes first, then mutated parents."""
+        """Returns the next batch, (B, 56): random (or seeded) genomes first, then mutated
+        parents."""
         if self._pending is not None:
             raise RuntimeError("ask() called twice without tell(); tell the last batch first")
-        if self._iteration == 0 or self.random_batches:
+        if self._iteration == 0 and self._initial is not None:
+            genomes = self._initial
+            sigma = initial_sigma(self._rng, len(genomes), self.mode, self.initial_sigma)
+        elif self._iteration == 0 or self.random_batches:
             genomes = random_genomes(self._rng, self.batch_size)
             sigma = initial_sigma(self._rng, self.batch_size, self.mode, self.initial_sigma)
         else:

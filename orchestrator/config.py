@@ -24,6 +24,7 @@ from linkevo.sim.study import (
     STUDY_FITNESSES,
     TARGETS,
     WALKING_FITNESS,
+    is_map_elites,
 )
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S
 
@@ -105,6 +106,10 @@ class GridConfig:
             `sim.study.CANDIDATES_PER_WALK` candidates per walk).
         walk_batch: candidates per iteration (and initial population) of a walking
             trial, >= 1 (`batch_size` is the path fitnesses').
+        seed_from: the warm start of the walking MAP-Elites trials: the run id of an
+            earlier MAP-Elites trial in the same store with a walk map, whose walked cells
+            make each trial's first batch (`workers.seed_repertoire`); "" (the default)
+            for none.
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -136,6 +141,7 @@ class GridConfig:
     walk_rerank: int = 0
     walks: int = 0
     walk_batch: int = DEFAULT_WALK_BATCH
+    seed_from: str = ""
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -171,6 +177,8 @@ class GridConfig:
             del out["walk_rerank"]
         if WALKING_FITNESS not in self.fitnesses:
             del out["walks"], out["walk_batch"]
+        if not out["seed_from"]:
+            del out["seed_from"]
         return out
 
 
@@ -275,6 +283,17 @@ def _validate(cfg: GridConfig) -> None:
                     "candidates per trial, e.g. --set walks=2000)")  # fmt: skip
     if not walking and cfg.walks:
         raise _fail("walks", cfg.walks, 'allowed: 0 unless fitnesses holds "Fw"')
+    if not isinstance(cfg.seed_from, str):
+        raise _fail("seed_from", cfg.seed_from, "allowed: a run id (a string)")
+    if cfg.seed_from:
+        others = [a for a in cfg.approaches if not is_map_elites(a)]
+        if cfg.fitnesses != (WALKING_FITNESS,) or others:
+            raise _fail(
+                "seed_from",
+                cfg.seed_from,
+                'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
+                f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
+            )
     _check_choices(cfg, "mode", MODES, many=False)
     _check_choices(cfg, "target", TARGETS, many=False)
     for key in ("experiment", "tracking_uri", "work_dir"):

@@ -26,6 +26,7 @@ from linkevo.orchestrator.grid_run import log_grid_summary, parent_run
 from linkevo.orchestrator.launch_checks import (
     check_no_shrink,
     check_restart,
+    check_seed,
     check_store,
     check_store_holds_grid,
     trial_specs,
@@ -131,6 +132,7 @@ def launch(
         Reservation.plan(cfg, len(grid.cells), cluster)  # refuses before the store is written
         experiment_id = ensure_experiment(uri, cfg.experiment)
         store = RunStore(uri, cfg.experiment, experiment_id=experiment_id)
+        check_seed(store, cfg.seed_from)
         lease = Lease.take(store.client, uri, experiment_id, Subject.grid(grid.grid_id))
         root = work_root(cfg, uri)
         finished = _settle_earlier_runs(store, grid, root, resume=resume, restart=restart)

@@ -16,6 +16,7 @@ from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.tracking import check_store_file
 
 if TYPE_CHECKING:
+    from linkevo.workers.store.runs import RunStore
     from linkevo.workers.trial_spec import TrialSpec
 
 
@@ -87,7 +88,11 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
         try:
             if cell.fitness == WALKING_FITNESS:
                 spec = TrialSpec.walking(
-                    cell.approach, cfg.walks, batch_size=cfg.walk_batch, **settings
+                    cell.approach,
+                    cfg.walks,
+                    batch_size=cfg.walk_batch,
+                    seed_from=cfg.seed_from,
+                    **settings,
                 )
             else:
                 spec = TrialSpec(
@@ -104,6 +109,33 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
             raise ConfigError(f"trial {cell.key}: {exc}") from exc
         specs[cell.key] = spec
     return specs
+
+
+def check_seed(store: RunStore, run_id: str) -> None:
+    """Raises ConfigError unless `run_id` (grid key `seed_from`; "" passes) is a MAP-Elites
+    trial of the store with a repertoire and a walk map: what a warm start reads."""
+    if not run_id:
+        return
+    from mlflow.exceptions import MlflowException
+
+    from linkevo.sim.study import is_map_elites
+
+    try:
+        run = store.client.get_run(run_id)
+    except MlflowException:
+        raise ConfigError(
+            f"config key 'seed_from' = {run_id!r} is invalid: no such run in {store.uri}"
+        ) from None
+    approach = run.data.tags.get(layout.APPROACH, "")
+    held = {a.path for a in store.client.list_artifacts(run_id)}
+    missing = [n for n in (layout.REPERTOIRE, layout.WALK_MAP) if n not in held]
+    if not is_map_elites(approach) or missing:
+        raise ConfigError(
+            f"config key 'seed_from' = {run_id!r} is invalid: a warm start needs a MAP-Elites "
+            f"trial with a walk map; this run is {approach or 'not a trial'}"
+            + (f" without {', '.join(missing)}" if missing else "")
+            + (f" (`linkevo walkmap {run_id}` makes its walk map)" if missing else "")
+        )
 
 
 def check_no_shrink(grid: Grid, earlier: list) -> None:

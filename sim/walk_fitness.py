@@ -61,10 +61,13 @@ REJECTED_LOSS = 3000.0
 SOUND_BELOW = BROKEN_LOSS / 2
 """An F_w loss below this is a sound walk's (no robot walks 5 m in 10 s, backwards or
 before it breaks); at or above it the robot broke or was never walked."""
-STAGES: tuple[str, ...] = ("walked", "cached", "rejected", "no_lego_build", "no_turn", "failed")
+STAGES: tuple[str, ...] = (
+    "walked", "cached", "seeded", "rejected", "no_lego_build", "no_turn", "failed",
+)  # fmt: skip
 """Where a candidate's evaluation ended: walked on the physics; its leg walked before in the
-trial (its rows reused); rejected by the 2-D checks; no whole-module rounding turns; the
-LEGO build does not turn a full turn; the build or a walk raised."""
+trial (its rows reused); a warm start's cell, told with its walk map's rows; rejected by
+the 2-D checks; no whole-module rounding turns; the LEGO build does not turn a full turn;
+the build or a walk raised."""
 WALKER_CM = 50.0
 """A walker: a leg that walks at least this far (cm, 10 s) on both floors without breaking."""
 SEARCH_SECONDS = 5.0
@@ -165,7 +168,7 @@ def floor_losses(stage: str, rows: dict[str, dict]) -> np.ndarray:
         stage: the candidate's stage (any but "rejected").
         rows: its row per floor (a walked or cached candidate's walk-map rows).
     """
-    if stage not in ("walked", "cached"):
+    if stage not in ("walked", "cached", "seeded"):
         return np.full(2, NO_LEG_LOSS)
     losses = {}
     for floor, row in rows.items():

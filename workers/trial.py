@@ -33,6 +33,7 @@ from linkevo.workers.evaluators import Evaluator
 from linkevo.workers.plots.linkage import draw_linkage
 from linkevo.workers.plots.repertoire import draw_trial_maps
 from linkevo.workers.recorders import MetricsCsv, Recorder
+from linkevo.workers.seed_repertoire import Seed
 from linkevo.workers.store.artifacts import atomic_path, write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.run_layout import (
     BEST_JSON,
@@ -236,6 +237,7 @@ def run_trial(
     recorder: Recorder,
     out_dir: Path,
     resume: bool = False,
+    seed: Seed | None = None,
 ) -> TrialResult:
     """Runs one trial: ask -> evaluate -> tell -> record, until the budget is spent.
 
@@ -260,6 +262,8 @@ def run_trial(
         recorder: receives every iteration's metrics and the final files.
         out_dir: the trial's folder (created if missing).
         resume: continue from `out_dir/checkpoint` when it exists.
+        seed: a walking trial's warm start (`spec.seed_from`'s repertoire and walk map,
+            `workers.seed_repertoire`): its first batch, when the trial starts afresh.
     """
     start = time.monotonic()
     out_dir = Path(out_dir)
@@ -270,6 +274,9 @@ def run_trial(
     if not (resume and _resume(spec, optimizer, evaluator, log, recorder, folder)):
         log.reset()
         (folder / CHECKPOINT_FILE).unlink(missing_ok=True)  # nothing else it did not write
+        if seed is not None:
+            optimizer.seed_with(seed.genomes)  # type: ignore[attr-defined]
+            evaluator.seed_with(seed)  # type: ignore[attr-defined]
     write_json_atomic(
         out_dir / SETTINGS_FILE,
         {

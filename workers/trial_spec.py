@@ -17,6 +17,7 @@ from linkevo.sim.study import (
     DEFAULT_ANGLES,
     DEFAULT_BATCH,
     DEFAULT_WALK_BATCH,
+    MAP_ELITES,
     MIN_ANGLES,
     MODES,
     MULTI_OBJECTIVE,
@@ -24,6 +25,7 @@ from linkevo.sim.study import (
     TARGETS,
     WALKING_FITNESS,
     evaluated_fitness,
+    is_map_elites,
 )
 
 if TYPE_CHECKING:
@@ -63,6 +65,9 @@ class TrialSpec:
             physics (`sim.walk_fitness`); the trial ends once it has walked this many, or
             after `evaluations` candidates, a guard (`CANDIDATES_PER_WALK` per walk when
             built with `walking`). 0 for the path fitnesses.
+        seed_from: a walking MAP-Elites trial's warm start: the run id of an earlier
+            MAP-Elites trial whose repertoire and walk map make the first batch
+            (`workers.seed_repertoire`); "" for none.
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -81,6 +86,7 @@ class TrialSpec:
     options: dict = field(default_factory=dict)
     walk_rerank: int = 0
     walks: int = 0
+    seed_from: str = ""
 
     @classmethod
     def walking(cls, approach: str, walks: int, **settings: object) -> TrialSpec:
@@ -123,6 +129,11 @@ class TrialSpec:
                 fail("walk_rerank is for the path fitnesses: an Fw trial walks every candidate")
         elif self.walks != 0:
             fail(f"walks = {self.walks!r} is for fitness Fw only (this trial is {self.fitness})")
+        if self.seed_from and not (self.walking_trial and is_map_elites(self.approach)):
+            fail(
+                f"seed_from = {self.seed_from!r} is for walking trials of a MAP-Elites "
+                f"approach ({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
+            )
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
             fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
         if self.max_seconds is not None and not (

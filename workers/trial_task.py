@@ -18,6 +18,7 @@ from mlflow.entities import Param, Run
 from mlflow.tracking import MlflowClient
 
 from linkevo.workers.evaluators import Evaluator, make_evaluator
+from linkevo.workers.seed_repertoire import SEED_DIR, fetch_seed, read_seed
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.mlflow_recorder import MlflowRecorder
 from linkevo.workers.store.outage import OUTAGE_LIMIT_S, ServerLost, patiently, use_quick_http
@@ -207,7 +208,10 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
             cpus_per_actor=job.cpus_per_evaluator,
             placement_group=ray.util.get_current_placement_group() if job.evaluators else None,
         )
-        result = run_trial(spec, evaluator, recorder, out_dir, resume=True)
+        seed = None
+        if spec.seed_from:
+            seed = read_seed(wait(lambda: fetch_seed(store, spec.seed_from, out_dir / SEED_DIR)))
+        result = run_trial(spec, evaluator, recorder, out_dir, resume=True, seed=seed)
         wait(lambda: client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by))
     except ServerLost:
         raise  # nothing can be written; the driver stops the grid, --resume marks the run

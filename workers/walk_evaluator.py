@@ -38,6 +38,7 @@ from linkevo.sim.walk_fitness import (
 )
 from linkevo.sim.walk_map import COLUMNS, walk_map_frame
 from linkevo.workers.evaluators import Bar, Pending
+from linkevo.workers.seed_repertoire import Seed
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -45,7 +46,9 @@ if TYPE_CHECKING:
 FLOOR_FIELDS = ("status", "mean_distance_cm", "breaks", "reason", "bound_cm",
                 "torque_p95_of_stall", "pin_force_p99_n", "seconds")  # fmt: skip
 """A walk-map row's figures, kept per floor in the walk log."""
-LOG_COUNTERS = ("walks", "walk_cache_hits", "rejected_2d", "rejected_build", "walk_failures")
+LOG_COUNTERS = (
+    "walks", "walk_cache_hits", "walks_reused", "rejected_2d", "rejected_build", "walk_failures",
+)  # fmt: skip
 """The walk log's running counts, as the trial's metrics name them."""
 
 
@@ -269,6 +272,11 @@ class WalkingEvaluator:
         self.log = WalkLog.empty()
         self._iteration = 0
         self._in_flight: Callable[[], Evaluation] | None = None
+        self._seeded: dict[bytes, dict[str, dict]] = {}
+
+    def seed_with(self, seed: Seed) -> None:
+        """Takes a warm start's rows: its genomes are told with them, not walked."""
+        self._seeded = {g.tobytes(): rows for g, rows in zip(seed.genomes, seed.rows, strict=True)}
 
     def __call__(self, genomes: np.ndarray) -> Evaluation:
         """Returns the evaluation of genomes (B, 56): `submit(genomes)()`."""
@@ -295,7 +303,9 @@ class WalkingEvaluator:
         base = evaluate(genomes, "Fp", self.mode, n_angles=self.n_angles)
         batch = decode(genomes, self.mode)
         checks = physical_checks(batch, simulate(batch, self.n_angles))
-        built = np.flatnonzero(checks.buildable)
+        seeded = [self._seeded.get(g.tobytes()) for g in genomes]
+        reused = np.array([r is not None for r in seeded])
+        built = np.flatnonzero(checks.buildable & ~reused)
         bars = np.full(len(genomes), np.inf) if bar is None else bar(genomes, base)
         known = self.log.known()
         walks = self.walkers.walk(genomes[built], self.mode, frozenset(known), bars[built])
@@ -303,14 +313,19 @@ class WalkingEvaluator:
         def collect() -> Evaluation:
             self._in_flight = None
             losses = np.repeat(rejected_loss(base.error, checks)[:, None], 2, axis=1)
-            done = list(walks)
-            rows = []
-            for i, (walk, _) in zip(built, done, strict=True):
+            done = [(CandidateWalk("seeded", "", (), 0.0), "") for _ in np.flatnonzero(reused)]
+            done += list(walks)
+            rows = [seeded[i] for i in np.flatnonzero(reused)]
+            built_now = np.concatenate([np.flatnonzero(reused), built]).astype(np.int64)
+            for i, (walk, _) in zip(built_now, done, strict=True):
+                if walk.stage == "seeded":
+                    losses[i] = floor_losses("seeded", seeded[i])
+                    continue
                 by_floor = known[walk.key] if walk.stage == "cached" else _by_floor(walk)
                 losses[i] = floor_losses(walk.stage, by_floor)
                 rows.append(by_floor)
-            self._tally(len(genomes) - len(built), [w for w, _ in done])
-            self.log.append(iteration, genomes[built], [w for w, _ in done],
+            self._tally(len(genomes) - len(built_now), [w for w, _ in done])
+            self.log.append(iteration, genomes[built_now], [w for w, _ in done],
                             [n for _, n in done], rows)  # fmt: skip
             loss = losses if self.two_objective else losses.max(axis=1)
             return dataclasses.replace(base, loss=np.ascontiguousarray(loss))
@@ -327,6 +342,8 @@ class WalkingEvaluator:
                 counts["walks"] += 1
             elif stage == "cached":
                 counts["walk_cache_hits"] += 1
+            elif stage == "seeded":
+                counts["walks_reused"] += 1
             elif stage == "failed":
                 counts["walk_failures"] += 1
             else:

@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import pandas as pd
 import pytest
 from mlflow.tracking import MlflowClient
 
@@ -32,8 +33,9 @@ pytestmark = pytest.mark.ray
 
 @pytest.fixture(scope="module")
 def cluster(tmp_path_factory) -> ClusterState:
+    """Three 1-CPU worker nodes: each test that stops one leaves two for the next."""
     folder = tmp_path_factory.mktemp("cluster")
-    state = up(ClusterSettings(dir=folder, workers=2, cpus_per_worker=1))
+    state = up(ClusterSettings(dir=folder, workers=3, cpus_per_worker=1))
     yield state
     down(folder)  # nothing to do when a test stopped it already
 
@@ -47,6 +49,54 @@ def linkevo(*args: str, env: dict[str, str], cwd: Path) -> subprocess.Popen:
         stderr=subprocess.STDOUT,
         text=True,
     )
+
+
+def test_a_walking_trial_walks_on_two_nodes_and_resumes_after_losing_one(
+    cluster: ClusterState, tmp_path: Path
+) -> None:
+    cfg = tiny_config_file(
+        tmp_path,
+        approaches=["MAP-LIS"],
+        fitnesses=["Fw"],
+        trials=1,
+        walks=160,
+        walk_batch=16,
+        evaluators_per_trial=2,
+        checkpoint_every=1,
+        work_dir=str(tmp_path / "work"),
+    )
+    grid_id = Grid.from_config(config.load(cfg)).grid_id
+    uri = cluster.tracking_uri
+    grid = linkevo(
+        "grid", str(cfg), "--address", cluster.address, "--tracking-uri", uri, "--no-progress",
+        env=cluster.env, cwd=tmp_path,
+    )  # fmt: skip
+    client = MlflowClient(uri)
+    deadline = time.monotonic() + 240
+    victim = None
+    while victim is None:
+        assert time.monotonic() < deadline, "the walking trial did not get going"
+        assert grid.poll() is None, f"the grid ended first:\n{grid.stdout.read()}"
+        for node in cluster.workers:
+            key = running_on(uri, grid_id, node.node_id)
+            runs = runs_by_key(uri, grid_id).get(key or "", [])
+            walked = [client.get_run(r).data.metrics.get("walks", 0) for r, _ in runs]
+            if key and max(walked, default=0) >= 32:
+                victim = node
+        time.sleep(0.2)
+    stop_node(cluster, victim, force=True)  # the node of the trial task and of one actor
+    output, _ = grid.communicate(timeout=420)
+    assert grid.returncode == 0, output
+
+    runs = runs_by_key(uri, grid_id)["MAP-LIS/Fw/00"]
+    assert sorted(status for _, status in runs) == ["FINISHED", "KILLED"]
+    finished = next(r for r, status in runs if status == "FINISHED")
+    log = pd.read_parquet(client.download_artifacts(finished, "walks.parquet", str(tmp_path)))
+    walked_on = set(log.loc[log["stage"] == "walked", "node"])
+    workers = {victim.node_id} | {n.node_id for n in cluster.workers}
+    assert walked_on <= workers and len(walked_on) >= 2, walked_on  # both actors' nodes
+    assert victim.node_id in walked_on  # the checkpoint kept the lost node's walks
+    assert client.get_run(finished).data.metrics["walks"] >= 160
 
 
 def test_a_grid_survives_a_stopped_worker_node_and_reads_back_through_the_server(
@@ -93,7 +143,9 @@ def test_a_grid_survives_a_stopped_worker_node_and_reads_back_through_the_server
         assert client.get_run(run_id).info.artifact_uri.startswith("mlflow-artifacts:")
         got = client.download_artifacts(run_id, "best_linkage.json", str(tmp_path))
         assert len(json.loads(Path(got).read_text())["genome"]) == 56
-    stored = list(Path(cluster.dir, "artifacts").rglob("best_linkage.json"))
+    mine = {run_id for runs in by_key.values() for run_id, _ in runs}
+    stored = [p for p in Path(cluster.dir, "artifacts").rglob("best_linkage.json")
+              if mine & set(p.parts)]  # fmt: skip
     assert len(stored) == 4  # proxied: the server wrote them, into its artefact folder
 
     report = linkevo(

@@ -377,3 +377,36 @@ def test_a_missing_or_damaged_repertoire_is_refused_by_name(store, tmp_path, cap
     client.log_artifact(bare, str(tmp_path / "repertoire.parquet"))
     assert main(["walkmap", bare, "--tracking-uri", uri]) == 2
     assert "has genomes that are not 56 genes in [0, 1)" in capsys.readouterr().err
+
+
+def test_a_walking_grid_starts_from_a_walked_repertoire(store, lis_map, tmp_path, capsys):
+    """`seed_from`: the walking trial's first batch is the earlier trial's walked cells,
+    told with their walk-map rows (no walk); a run that cannot seed is refused first."""
+    from linkevo.orchestrator.config import ConfigError
+    from linkevo.orchestrator.driver import launch
+    from tests.helpers.grid import tiny_grid
+
+    uri, runs = store
+    walked, _ = lis_map
+    usable = walked[walked["status"] == "walked"].groupby("cell")["floor"].nunique()
+    seeded_cells = set(usable[usable == 2].index)
+    assert seeded_cells  # the map walked some cells on both floors
+    grid = tiny_grid(tmp_path, approaches=["MAP-LIS"], fitnesses=["Fw"], trials=1, walks=6,
+                     walk_batch=8, evaluators_per_trial=0, trial_cpus=1,
+                     seed_from=runs["MAP-LIS"], tracking_uri=uri)  # fmt: skip
+    result = launch(grid, progress=False)
+    assert not result.failed
+    run_id = result.outcomes[0].run_id
+    client = MlflowClient(uri)
+    log = pd.read_parquet(client.download_artifacts(run_id, "walks.parquet", str(tmp_path)))
+    first = log[log["iteration"] == 1]
+    assert set(first["stage"]) == {"seeded"} and len(first) == len(seeded_cells)
+    assert client.get_run(run_id).data.metrics["walks_reused"] == len(seeded_cells)
+    history = client.get_metric_history(run_id, "walks")
+    assert min(m.value for m in history) == 0  # the seeded batch walked nothing
+    for seed_from, message in ((runs["EA"], "a MAP-Elites trial with a walk map"),
+                               (runs["MAP-WH"], "without walkmap.parquet")):  # fmt: skip
+        again = tiny_grid(tmp_path, approaches=["MAP-LIS"], fitnesses=["Fw"], trials=1,
+                          walks=6, seed_from=seed_from, tracking_uri=uri)  # fmt: skip
+        with pytest.raises(ConfigError, match=message):
+            launch(again, progress=False)

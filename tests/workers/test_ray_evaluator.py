@@ -91,3 +91,25 @@ def test_an_error_raised_in_an_actor_reaches_the_caller(ray_local):
         with pytest.raises(ray.exceptions.RayTaskError, match="GenomeError"):
             ray.get(pool.actors[0].evaluate.remote(np.full((2, 56), np.nan)))
         assert_same(pool(genomes), evaluate(genomes, "Fp"))
+
+
+def test_a_walking_trial_on_two_actors_equals_one_in_process(ray_local, tmp_path):
+    """Candidates walked on evaluator actors, one task each: the same trial, bit for bit,
+    as walked here, whichever actor took which candidate; each names its Ray node."""
+    import pandas as pd
+
+    from linkevo.workers.evaluators import make_evaluator
+    from linkevo.workers.recorders import NullRecorder
+    from linkevo.workers.trial import run_trial
+    from linkevo.workers.trial_spec import TrialSpec
+
+    spec = TrialSpec.walking("MAP-LIS", 24, seed=3)
+    here = run_trial(spec, make_evaluator(spec), NullRecorder(), tmp_path / "here")
+    with make_evaluator(spec, actors=2) as evaluator:
+        there = run_trial(spec, evaluator, NullRecorder(), tmp_path / "actors")
+    assert (here.out_dir / "metrics.csv").read_text() == (there.out_dir / "metrics.csv").read_text()
+    logs = [pd.read_parquet(r.out_dir / "walks.parquet") for r in (here, there)]
+    same = [c for c in logs[0].columns if c not in ("node", "compute_s", "genome")]
+    pd.testing.assert_frame_equal(logs[0][same], logs[1][same])
+    node = ray_local.get_runtime_context().get_node_id()
+    assert set(logs[1].loc[logs[1]["stage"] != "seeded", "node"]) == {node}
