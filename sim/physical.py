@@ -108,7 +108,7 @@ def max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
     length = np.sqrt(span[..., 0] ** 2 + span[..., 1] ** 2)  # (N, 15, A)
     stretch = np.abs(length - batch.beam_length[:, :, None])
     stretch = np.where(present[:, :, None], stretch, np.nan)
-    return np.nanmax(stretch.reshape(pos.shape[0], -1), axis=1)
+    return np.fmax.reduce(stretch.reshape(pos.shape[0], -1), axis=1)  # NaN-skipping max
 
 
 @_quiet
@@ -119,12 +119,20 @@ def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
     rows = np.arange(n)[:, None]
     stretch = max_stretch(batch, motion)
 
+    # Each triangle joint's transmission angle (N, T, A); T: the most triangles of any row.
     triangle = batch.node_int[:, :, 0] == NODE_KINDS.index("triangle")  # (N, 12)
-    u = pos[rows, np.where(triangle, batch.node_int[:, :, 1], 0)] - pos  # joint -> A
-    v = pos[rows, np.where(triangle, batch.node_int[:, :, 2], 0)] - pos  # joint -> C
-    cos = np.sum(u * v, axis=-1) / (np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1))
-    angle = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))  # (N, 12, A)
-    transmission = np.where(triangle[:, :, None], np.minimum(angle, 180.0 - angle), np.inf)
+    order = np.argsort(~triangle, axis=1, kind="stable")[:, : max(int(triangle.sum(1).max()), 1)]
+    joint = np.take_along_axis(triangle, order, axis=1)  # (N, T) a real triangle
+    node_int = np.take_along_axis(batch.node_int, order[:, :, None], axis=1)
+    at = pos[rows, order]
+    u = pos[rows, np.where(joint, node_int[:, :, 1], 0)] - at  # joint -> A
+    v = pos[rows, np.where(joint, node_int[:, :, 2], 0)] - at  # joint -> C
+    dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
+    norms = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1]) * np.sqrt(
+        v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
+    )
+    angle = np.degrees(np.arccos(np.clip(dot / norms, -1.0, 1.0)))  # (N, T, A)
+    transmission = np.where(joint[:, :, None], np.minimum(angle, 180.0 - angle), np.inf)
     per_angle = np.where(np.isnan(transmission), np.inf, transmission).min(axis=1)  # (N, A)
     toggles = ((per_angle < TOGGLE_DEG) & motion.valid).sum(axis=1)
     lowest = per_angle.min(axis=1)
@@ -136,5 +144,5 @@ def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
         min_transmission_deg=min_transmission,
         toggle_passages=toggles.astype(np.int64),
         max_stretch=stretch,
-        size_modules=np.nanmax(flat, axis=1) - np.nanmin(flat, axis=1),
+        size_modules=np.fmax.reduce(flat, axis=1) - np.fmin.reduce(flat, axis=1),
     )
