@@ -21,6 +21,7 @@ COMMAND_MODULES = (
     "linkevo.orchestrator.commands.pull",
     "linkevo.orchestrator.commands.explore",
     "linkevo.orchestrator.commands.walkmap",
+    "linkevo.orchestrator.commands.walkmodel",
     "linkevo.orchestrator.commands.cluster",
     "linkevo.orchestrator.commands.hexapod",
 )

@@ -7,8 +7,10 @@ descriptors and physical checks (`sim.physical`), filters on the checks, a build
 the `linkevo pull RUN_ID:CELL` command for a clicked cell, and two pinned cells side by
 side. Where the trial has a walk map (`linkevo walkmap`), the map can be coloured by the
 distance the simulated robot walks on a floor, filtered on "walks at least" and "does not
-break", and a cell's panel shows its predicted distances. A grid's page holds every
-repertoire trial behind a trial picker.
+break", and a cell's panel shows its walks. Where the trial has predicted walks (`linkevo
+walkmodel predict`), cells without a walk are coloured by the learned walk model's
+prediction, marked as predicted on the map, in the legend, the panels and the pins. A
+grid's page holds every repertoire trial behind a trial picker.
 
 Each trial's cells travel as gzip-compressed JSON (base64) in the page, inflated by the
 browser's own `DecompressionStream` when the trial is shown, so the page needs no network
@@ -53,6 +55,8 @@ def repertoire_view(
     trial: TrialRun,
     drawn: int | None = None,
     walks: pd.DataFrame | None = None,
+    predicted: pd.DataFrame | None = None,
+    model_run: str | None = None,
 ) -> dict:
     """Returns the page's data of one repertoire.
 
@@ -62,6 +66,8 @@ def repertoire_view(
         trial: the run it came from.
         drawn: draw the linkage of only the `drawn` lowest-loss cells (None: every cell).
         walks: the trial's walk map (`walkmap.parquet`), or None.
+        predicted: the trial's predicted walks (`walkpred.parquet`), or None; model_run:
+            the walk model's run that predicted them.
 
     Returns:
         A JSON-able dict: the trial's identity, the descriptor names and bins per
@@ -72,8 +78,9 @@ def repertoire_view(
         angle, (12, 2)), t (node kinds, (12,)), m (beams: start, end, kind, length, modules
         rounded on their own), f (foot path x and y, (2, A), None at failed angles), and
         with a walk map w: per floor of `floors`, [distance cm, breaks 0/1, reason] or None
-        where the cell was not walked on it. Positions are rounded to 0.1 module, lengths
-        to 0.01, descriptors to 0.001, distances to 0.1 cm.
+        where the cell was not walked on it; with predicted walks p: per floor,
+        [predicted cm, spread cm, probability of breaking] or None. Positions are rounded
+        to 0.1 module, lengths to 0.01, descriptors to 0.001, distances to 0.1 cm.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
     bins_of = bin_columns(table.columns)
@@ -102,6 +109,9 @@ def repertoire_view(
     loss = json_floats(table["loss"].to_numpy(), 4)
     error = (~motion.valid).sum(axis=1).astype(int).tolist()  # failed crank angles
     floors, walked = _walked(walks)
+    guessed = _predicted(predicted)
+    if guessed:
+        floors = in_floor_order({*floors, *(floor for _, floor in guessed)})
     cells = []
     for i, cell in enumerate(table["cell"].to_numpy().astype(int).tolist()):
         drawing = None
@@ -135,8 +145,10 @@ def repertoire_view(
                 "g": drawing,
             }
         )
-        if floors:
+        if walked:
             cells[-1]["w"] = [walked.get((cell, floor)) for floor in floors]
+        if guessed:
+            cells[-1]["p"] = [guessed.get((cell, floor)) for floor in floors]
     return {
         "run_id": trial.run_id,
         "trial_key": trial.trial_key,
@@ -148,6 +160,7 @@ def repertoire_view(
         "drawn": len(cells) if drawn is None else min(drawn, len(cells)),
         "floors": floors,
         "walk_s": walk_seconds(walks),
+        "walk_model": model_run if guessed else None,
         "cells": cells,
     }
 
@@ -171,6 +184,24 @@ def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str]
         )
     }
     return floors, walked
+
+
+def _predicted(predicted: pd.DataFrame | None) -> dict[tuple[int, str], list]:
+    """Returns, per (cell, floor) predicted, the page's [predicted cm, spread cm, probability
+    of breaking]."""
+    if predicted is None or predicted.empty:
+        return {}
+    return {
+        (int(cell), str(floor)): [round(float(d), 1), round(float(s), 1), round(float(p), 3)]
+        for cell, floor, d, s, p in zip(
+            predicted["cell"],
+            predicted["floor"],
+            predicted["predicted_cm"],
+            predicted["spread_cm"],
+            predicted["p_break"],
+            strict=True,
+        )
+    }
 
 
 def walk_seconds(walks: pd.DataFrame | None) -> float | None:
@@ -252,7 +283,11 @@ def explore(
         for done, trial in enumerate(trials, 1):
             table = store.repertoire(trial.run_id, Path(tmp) / trial.run_id)
             walks = store.walk_map(trial.run_id, Path(tmp) / f"{trial.run_id}-walks")
-            views.append(repertoire_view(table, trial, drawn, walks))
+            predicted = store.walk_prediction(trial.run_id, Path(tmp) / f"{trial.run_id}-pred")
+            model_run = None
+            if predicted is not None:
+                model_run = store.client.get_run(trial.run_id).data.tags.get(layout.PREDICTED_BY)
+            views.append(repertoire_view(table, trial, drawn, walks, predicted, model_run))
             if progress is not None:
                 progress(done, trial)
         write_bytes_atomic(out, render_page(title, views).encode("utf-8"))

@@ -93,7 +93,12 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
         lego_line(doc["lego"]),
         "",
         *(
-            [f"Predicted walk: {walk_line(doc['predicted_walk'])}.", ""]
+            [f"Simulated walk: {walk_line(doc['simulated_walk'])}.", ""]
+            if doc.get("simulated_walk")
+            else []
+        ),
+        *(
+            [f"Predicted walk: {prediction_line(doc['predicted_walk'])}.", ""]
             if doc.get("predicted_walk")
             else []
         ),
@@ -204,7 +209,7 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     }
 
 
-def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
+def simulated_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
     """Returns the pulled cell's rows of its trial's walk map (`linkevo walkmap`, or a
     walking trial's own), per floor (distance, breaks, reason); for a walking trial's best
     linkage, its rows of the trial's walk log; {} when it was not walked."""
@@ -254,8 +259,47 @@ def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataF
                                        "reason", "seconds"])  # fmt: skip
 
 
+def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
+    """Returns the pulled cell's rows of its trial's predicted walks (`linkevo walkmodel
+    predict`) per floor (predicted distance, spread, probability of breaking, the model's
+    run); {} when they were not predicted."""
+    if not source.run_id or source.cell is None:
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        predicted = store.walk_prediction(source.run_id, Path(tmp))
+    if predicted is None:
+        return {}
+    model = store.client.get_run(source.run_id).data.tags.get(layout.PREDICTED_BY, "")
+    rows = predicted[predicted["cell"] == source.cell]
+    order = in_floor_order(rows["floor"])
+    rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")
+    return {
+        str(r.floor): {
+            "predicted_cm": round(float(r.predicted_cm), 1),
+            "spread_cm": round(float(r.spread_cm), 1),
+            "p_break": round(float(r.p_break), 3),
+            "seconds": 10.0,
+            "walk_model": model,
+        }
+        for r in rows.itertuples()
+    }
+
+
+def prediction_line(predicted: dict[str, dict]) -> str:
+    """Returns the walk model's predictions in one line, marked as predicted."""
+    model = next(iter(predicted.values()))["walk_model"]
+    return (
+        "; ".join(
+            f"{floor} {p['predicted_cm']:.1f} ± {p['spread_cm']:.1f} cm in 10 s, breaks with "
+            f"probability {p['p_break']:.2f}"
+            for floor, p in predicted.items()
+        )
+        + f" (predicted by the walk model {model}, no physics)"
+    )
+
+
 def walk_line(walks: dict[str, dict]) -> str:
-    """Returns the predicted walks in one line: the distance per floor, and breaks."""
+    """Returns the simulated walks in one line: the distance per floor, and breaks."""
     return (
         "; ".join(
             f"{floor} {w['distance_cm']:.1f} cm in {w['seconds']:g} s"
@@ -267,12 +311,17 @@ def walk_line(walks: dict[str, dict]) -> str:
 
 
 def pull(
-    source: SourceLinkage, out: Path, *, gif: bool = False, walks: dict[str, dict] | None = None
+    source: SourceLinkage,
+    out: Path,
+    *,
+    gif: bool = False,
+    walks: dict[str, dict] | None = None,
+    predicted: dict[str, dict] | None = None,
 ) -> list[Path]:
     """Writes linkage.json, linkage.png, build_sheet.md and .csv, linkage.gif (with `gif`)
     and, when a LEGO build exists, path_overlay.png, layers.png (the exploded layer view)
-    and template.pdf (1:1 on A4 pages) into out. `walks` (`predicted_walks`) go into the
-    document and the sheet."""
+    and template.pdf (1:1 on A4 pages) into out. `walks` (`simulated_walks`) and
+    `predicted` (`predicted_walks`) go into the document and the sheet."""
     out.mkdir(parents=True, exist_ok=True)
     genome, mode = from_document(source.document)
     n_angles = int(source.document.get("n_angles", DEFAULT_ANGLES))
@@ -289,7 +338,9 @@ def pull(
     doc = to_document(genome, mode, n_angles=n_angles, meta=meta)
     doc["lego"] = lego_build(genome, mode, source.fitness, n_angles)
     if walks:
-        doc["predicted_walk"] = walks
+        doc["simulated_walk"] = walks
+    if predicted:
+        doc["predicted_walk"] = predicted
     rows = build_sheet(doc, doc["lego"].get("lengths"), doc["lego"].get("layers"))
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=SHEET_COLUMNS, lineterminator="\n")

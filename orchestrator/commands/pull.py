@@ -152,7 +152,13 @@ def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
 
 def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo pull`."""
-    from linkevo.orchestrator.pull import predicted_walks, pull, walk_line
+    from linkevo.orchestrator.pull import (
+        predicted_walks,
+        prediction_line,
+        pull,
+        simulated_walks,
+        walk_line,
+    )
     from linkevo.workers.store.linkages import LinkageRef, load_source
     from linkevo.workers.store.runs import RunStore
 
@@ -179,10 +185,14 @@ def handle(args: argparse.Namespace) -> int:
     cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
     print(f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
           file=sys.stderr)  # fmt: skip
-    walks = predicted_walks(store, source)
+    walks = simulated_walks(store, source)
     if walks:
-        print(f"predicted walk: {walk_line(walks)}", file=sys.stderr)
-    for path in pull(source, args.out or Path("pulled"), gif=args.gif, walks=walks):
+        print(f"simulated walk: {walk_line(walks)}", file=sys.stderr)
+    predicted = predicted_walks(store, source)
+    if predicted:
+        print(f"predicted walk: {prediction_line(predicted)}", file=sys.stderr)
+    out = args.out or Path("pulled")
+    for path in pull(source, out, gif=args.gif, walks=walks, predicted=predicted):
         print(path)
     return 0
 

@@ -189,7 +189,7 @@ def test_the_explorer_colours_by_distance_and_filters_on_walking(store, lis_map,
         assert browser.find_element(By.ID, "passing").text.startswith(f"{sound} of ")
 
 
-def test_pull_prints_and_writes_a_walked_cells_predicted_walks(store, lis_map, tmp_path, capsys):
+def test_pull_prints_and_writes_a_walked_cells_simulated_walks(store, lis_map, tmp_path, capsys):
     import json
 
     uri, runs = store
@@ -200,10 +200,10 @@ def test_pull_prints_and_writes_a_walked_cells_predicted_walks(store, lis_map, t
     out = tmp_path / "pulled"
     assert main(["pull", f"{run_id}:{cell}", "--out", str(out), "--tracking-uri", uri]) == 0
     printed = capsys.readouterr().err
-    assert f"predicted walk: flat {walked['mean_distance_cm']:.1f} cm in 2 s" in printed
+    assert f"simulated walk: flat {walked['mean_distance_cm']:.1f} cm in 2 s" in printed
     document = json.loads((out / "linkage.json").read_text())
-    assert document["predicted_walk"]["flat"]["distance_cm"] == round(walked["mean_distance_cm"], 1)
-    assert "Predicted walk: flat" in (out / "build_sheet.md").read_text()
+    assert document["simulated_walk"]["flat"]["distance_cm"] == round(walked["mean_distance_cm"], 1)
+    assert "Simulated walk: flat" in (out / "build_sheet.md").read_text()
 
 
 def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(

@@ -2,9 +2,10 @@
 
 A grid is a parent run (kind "grid"); each trial is a nested run (kind "trial") tagged with
 its grid id and trial key; a field trial, real or simulated, is a run of kind
-"field_trial". Every module that writes or reads runs takes the names from here; searches
-go through `workers.store.runs.RunStore`, which pages through all results and puts values
-in a filter only through `where` and `quote` (`docs/grid.md` shows the layout).
+"field_trial"; a learned walk model is a run of kind "walk_model". Every module that writes
+or reads runs takes the names from here; searches go through
+`workers.store.runs.RunStore`, which pages through all results and puts values in a filter
+only through `where` and `quote` (`docs/grid.md` shows the layout).
 """
 
 from __future__ import annotations
@@ -14,6 +15,8 @@ import re
 KIND = "linkevo.kind"
 """The tag every linkevo run carries: one of the kinds below."""
 GRID, TRIAL, FIELD_TRIAL = "grid", "trial", "field_trial"
+WALK_MODEL = "walk_model"
+"""A learned walk model's run (`linkevo walkmodel fit`): its weights, features and figures."""
 PARENT = "mlflow.parentRunId"
 NOTE = "mlflow.note.content"
 GRID_ID = "grid_id"
@@ -67,6 +70,18 @@ WALK_MAP = "walkmap.parquet"
 plus the cell's bins), logged by `linkevo walkmap`, or by a walking trial (fitness F_w)
 itself."""
 WALK_MAP_PNG = "walkmap.png"
+WALK_PREDICTION = "walkpred.parquet"
+"""A repertoire trial's predicted walks (`linkevo walkmodel predict`): a row per filled cell
+and floor (`workers.store.tables.PREDICTION_COLUMNS` plus the cell's bins); the run's tag
+`PREDICTED_BY` names the model's run."""
+PREDICTED_BY = "walk_model"
+"""The tag of a trial run whose walks were predicted: the walk model's run id."""
+WALK_MODEL_PT = "walk_model.pt"
+"""A walk model's weights as a torch state dict (`torch.load(path, weights_only=True)`)."""
+WALK_MODEL_JSON = "walk_model.json"
+"""A walk model's description: its features, the repertoires it learned from and was
+measured on, its held-out figures."""
+WALK_MODEL_PNG = "walk_model.png"
 WALK_LOG = "walks.parquet"
 """A walking trial's walk log: a row per candidate it built (its stage, leg key, node,
 seconds and each floor's figures; `workers.walk_evaluator.WalkLog`)."""

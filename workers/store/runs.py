@@ -288,6 +288,19 @@ class RunStore:
             return None
         return read_walk_map(self.download(run_id, layout.WALK_MAP, into), run_id)
 
+    def walk_prediction(self, run_id: str, into: Path) -> pd.DataFrame | None:
+        """Returns the run's predicted walks (`linkevo walkmodel predict`), checked by
+        content, or None when it has none.
+
+        Raises:
+            ArtefactError: they are damaged.
+        """
+        from linkevo.workers.store.tables import read_walk_prediction
+
+        if layout.WALK_PREDICTION not in {a.path for a in self.client.list_artifacts(run_id)}:
+            return None
+        return read_walk_prediction(self.download(run_id, layout.WALK_PREDICTION, into), run_id)
+
 
 def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
     """Returns one run per trial key of a trial table: a FINISHED one if any, else the

@@ -177,3 +177,40 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
     if not np.isfinite(distance[sound]).all():
         raise fail("has walks that do not break but have no finite distance")
     return frame.assign(mean_distance_cm=distance)
+
+
+PREDICTION_COLUMNS = ("cell", "floor", "predicted_cm", "spread_cm", "p_break")
+"""A `walkpred.parquet` row per cell and floor (then the cell's bins): the distance the
+walk model predicts in 10 s (cm), its spread (the ensemble's standard deviation, cm) and
+the probability that the robot breaks."""
+
+
+def read_walk_prediction(path: Path, run_id: str) -> pd.DataFrame:
+    """Returns a run's predicted walks (`linkevo walkmodel predict`) read from `path`,
+    checked by content.
+
+    Raises:
+        ArtefactError: unreadable, a column missing, an unknown floor, a (cell, floor)
+            pair twice, or figures that are not numbers.
+    """
+    from linkevo.workers.store.run_layout import WALK_PREDICTION
+
+    remedy = f"predict it anew with: linkevo walkmodel predict {run_id}"
+    frame = _read(path, WALK_PREDICTION, run_id, remedy)
+
+    def fail(problem: str) -> ArtefactError:
+        return ArtefactError(WALK_PREDICTION, run_id, problem, remedy)
+
+    missing = [c for c in PREDICTION_COLUMNS if c not in frame.columns]
+    if missing:
+        raise fail(f"lacks the column(s) {', '.join(missing)}")
+    if frame["cell"].to_numpy().dtype.kind != "i":
+        raise fail("has cells that are not integers")
+    if sorted(set(frame["floor"]) - set(FLOORS)):
+        raise fail("has unknown floors")
+    if frame.duplicated(["cell", "floor"]).any():
+        raise fail("holds a cell and floor twice")
+    figures = frame[["predicted_cm", "spread_cm", "p_break"]]
+    if any(figures[c].to_numpy().dtype.kind != "f" for c in figures):
+        raise fail("has figures that are not numbers")
+    return frame

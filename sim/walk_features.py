@@ -1,0 +1,119 @@
+"""Provides `walk_features`: what is known of a linkage's walk without physics, as the
+learned walk model's input (`algorithms.walk_model`).
+
+A walk is decided by where the foot goes (its path over the turn, in the leg's own frame
+as the robot carries it), by what else of the leg comes near the floor, by how hard the
+mechanism is to drive, and by how far its LEGO build strays from it. All of it comes from
+the 2-D kernel's batch simulation at the study's 40 crank angles, for a whole repertoire
+at once (no LEGO build, no MuJoCo: a repertoire of 10,000 cells in a fraction of a second).
+
+The features of one linkage (`FEATURE_NAMES`, in modules or degrees):
+- the foot path, x then y at each of the 40 angles, relative to the motor axle, mirrored so
+  that the stance (the lower half of the path) moves towards +x, as the robot mounts
+  every leg (`sim.leg.Leg.facing`); 0 where an angle fails;
+- the path's size and place: its x and y extent, lowest and highest y, the stance stroke
+  (x extent of the lower half), mean x and y, how far below the foot's lowest point any
+  other node reaches (another part touching the floor), the share of angles assembled;
+- the mechanism: crank length, number of beams, total and longest beam, the physical
+  checks (smallest transmission angle, toggle passages, largest stretch, width, height);
+- its LEGO build: the beams' total and largest distance from a whole number of modules.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from linkevo.sim.decoding import decode
+from linkevo.sim.kinematics import simulate
+from linkevo.sim.physical import physical_checks
+from linkevo.sim.study import DEFAULT_ANGLES
+
+FEATURES_VERSION = "linkevo.walk-features/1"
+"""What `walk_features` computes; a walk model records it and refuses other inputs."""
+STANCE_BANDS: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
+"""Heights above the foot's lowest point (modules) within which it counts as down: per band,
+the share of the turn it is down (duty), its x extent while down (stroke) and the share of
+that time it moves backwards."""
+SCALARS: tuple[str, ...] = (
+    "path_width", "path_height", "path_low", "path_high", "stance_stroke", "path_mean_x",
+    "path_mean_y", "reach_below_foot", "assembled_share", "crank_length", "n_beams",
+    "beams_total", "beam_longest", "min_transmission_deg", "toggle_passages", "max_stretch",
+    "width", "height", "rounding_total", "rounding_largest",
+    *(f"{what}_{h:g}" for h in STANCE_BANDS for what in ("duty", "stroke", "backwards")),
+)  # fmt: skip
+FEATURE_NAMES: tuple[str, ...] = (
+    *(f"foot_x_{k}" for k in range(DEFAULT_ANGLES)),
+    *(f"foot_y_{k}" for k in range(DEFAULT_ANGLES)),
+    *SCALARS,
+)
+"""The columns of `walk_features`, in order."""
+
+
+def walk_features(genomes: np.ndarray, mode: str = "paper") -> np.ndarray:
+    """Returns (N, len(FEATURE_NAMES)) float32 features of genomes (N, 56) in `mode`."""
+    genomes = np.asarray(genomes, dtype=np.float64).reshape(-1, 56)
+    n = len(genomes)
+    if not n:
+        return np.zeros((0, len(FEATURE_NAMES)), np.float32)
+    batch = decode(genomes, mode)
+    motion = simulate(batch, DEFAULT_ANGLES)
+    checks = physical_checks(batch, motion)
+    rows = np.arange(n)
+    pos = motion.positions - motion.positions[:, :1]  # (N, 12, A, 2) from the motor axle
+    path = pos[rows, motion.foot]  # (N, A, 2)
+    valid = motion.valid
+    y = np.where(valid, path[..., 1], np.nan)
+    low = y <= ((np.nanmin(y, axis=1) + np.nanmax(y, axis=1)) / 2)[:, None]
+    step = np.diff(path[..., 0], axis=1, append=path[:, :1, 0])
+    facing = np.where(np.nansum(np.where(low & valid, step, 0.0), axis=1) >= 0, 1.0, -1.0)
+    x = np.where(valid, path[..., 0] * facing[:, None], np.nan)
+    stance = np.where(low, x, np.nan)
+    lengths = batch.beam_length
+    present = np.arange(lengths.shape[1])[None, :] < batch.n_beams[:, None]
+    rounding = np.where(present, np.abs(lengths - np.round(np.maximum(lengths, 1.0))), 0.0)
+    others = np.where(valid[:, None, :], pos[..., 1], np.nan)
+    scalars = np.stack(
+        [
+            np.nanmax(x, axis=1) - np.nanmin(x, axis=1),
+            np.nanmax(y, axis=1) - np.nanmin(y, axis=1),
+            np.nanmin(y, axis=1),
+            np.nanmax(y, axis=1),
+            np.nanmax(stance, axis=1) - np.nanmin(stance, axis=1),
+            np.nanmean(x, axis=1),
+            np.nanmean(y, axis=1),
+            np.nanmin(y, axis=1) - np.fmin.reduce(others.reshape(n, -1), axis=1),
+            valid.mean(axis=1),
+            lengths[:, 0],
+            batch.n_beams.astype(float),
+            np.where(present, lengths, 0.0).sum(axis=1),
+            np.where(present, lengths, 0.0).max(axis=1),
+            checks.min_transmission_deg,
+            checks.toggle_passages.astype(float),
+            checks.max_stretch,
+            checks.size_modules[:, 0],
+            checks.size_modules[:, 1],
+            rounding.sum(axis=1),
+            rounding.max(axis=1),
+            *_stance_bands(x, y, valid),
+        ],
+        axis=1,
+    )
+    out = np.concatenate([x, y, scalars], axis=1)
+    return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+
+
+def _stance_bands(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> list[np.ndarray]:
+    """Per `STANCE_BANDS` height: duty, stroke and backwards share of paths x, y (N, A)."""
+    low = np.nanmin(y, axis=1)[:, None]
+    step = np.diff(x, axis=1, append=x[:, :1])  # towards the next angle
+    out = []
+    for h in STANCE_BANDS:
+        down = valid & (y <= low + h)
+        xs = np.where(down, x, np.nan)
+        count = down.sum(axis=1)
+        out += [
+            down.mean(axis=1),
+            np.nanmax(xs, axis=1) - np.nanmin(xs, axis=1),
+            np.where(down & (step < 0), 1.0, 0.0).sum(axis=1) / np.maximum(count, 1),
+        ]
+    return out
