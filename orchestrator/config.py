@@ -110,6 +110,9 @@ class GridConfig:
             earlier MAP-Elites trial in the same store with a walk map, whose walked cells
             make each trial's first batch (`workers.seed_repertoire`); "" (the default)
             for none.
+        surrogate: the walking MAP-Elites trials walk only the candidates the learned walk
+            model, fitted on each trial's walks as it goes, predicts could enter or improve
+            the archive (`workers.walk_surrogate`); false (the default) walks every one.
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -142,6 +145,7 @@ class GridConfig:
     walks: int = 0
     walk_batch: int = DEFAULT_WALK_BATCH
     seed_from: str = ""
+    surrogate: bool = False
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -168,8 +172,9 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank` counts only when it is on, and `walks` and `walk_batch` only for a grid
-        with walking trials, so grids without them keep their ids. `trials` does not
+        `walk_rerank`, `seed_from` and `surrogate` count only when they are on, and `walks`
+        and `walk_batch` only for a grid with walking trials, so grids without them keep
+        their ids. `trials` does not
         count: a trial's seed depends on its index, not on how many the grid holds, so a
         grid with more trials extends one with fewer (`--resume`)."""
         out = {k: v for k, v in self.to_dict().items() if k not in EXECUTION_KEYS and k != "trials"}
@@ -179,6 +184,8 @@ class GridConfig:
             del out["walks"], out["walk_batch"]
         if not out["seed_from"]:
             del out["seed_from"]
+        if not out["surrogate"]:
+            del out["surrogate"]
         return out
 
 
@@ -291,6 +298,17 @@ def _validate(cfg: GridConfig) -> None:
             raise _fail(
                 "seed_from",
                 cfg.seed_from,
+                'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
+                f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
+            )
+    if not isinstance(cfg.surrogate, bool):
+        raise _fail("surrogate", cfg.surrogate, "allowed: true or false")
+    if cfg.surrogate:
+        others = [a for a in cfg.approaches if not is_map_elites(a)]
+        if cfg.fitnesses != (WALKING_FITNESS,) or others:
+            raise _fail(
+                "surrogate",
+                cfg.surrogate,
                 'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
                 f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
             )

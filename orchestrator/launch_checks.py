@@ -92,6 +92,7 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
                     cfg.walks,
                     batch_size=cfg.walk_batch,
                     seed_from=cfg.seed_from,
+                    surrogate=cfg.surrogate,
                     **settings,
                 )
             else:

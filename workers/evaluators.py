@@ -98,7 +98,9 @@ def make_evaluator(
 
             walkers = ActorWalkers.start(actors, cpus_per_actor, placement_group)
         two = spec.eval_fitness != spec.fitness
-        return WalkingEvaluator(spec.mode, spec.n_angles, two_objective=two, walkers=walkers)
+        return WalkingEvaluator(
+            spec.mode, spec.n_angles, two_objective=two, walkers=walkers, surrogate=spec.surrogate
+        )
     if not actors:
         return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)
     from linkevo.workers.ray_evaluator import ActorPoolEvaluator

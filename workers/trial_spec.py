@@ -68,6 +68,9 @@ class TrialSpec:
         seed_from: a walking MAP-Elites trial's warm start: the run id of an earlier
             MAP-Elites trial whose repertoire and walk map make the first batch
             (`workers.seed_repertoire`); "" for none.
+        surrogate: a walking MAP-Elites trial walks only the candidates the learned walk
+            model, fitted on its walks as it goes, predicts could enter or improve its
+            archive (`workers.walk_surrogate`).
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -87,6 +90,7 @@ class TrialSpec:
     walk_rerank: int = 0
     walks: int = 0
     seed_from: str = ""
+    surrogate: bool = False
 
     @classmethod
     def walking(cls, approach: str, walks: int, **settings: object) -> TrialSpec:
@@ -133,6 +137,13 @@ class TrialSpec:
             fail(
                 f"seed_from = {self.seed_from!r} is for walking trials of a MAP-Elites "
                 f"approach ({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
+            )
+        if not isinstance(self.surrogate, bool):
+            fail(f"surrogate must be true or false, got {self.surrogate!r}")
+        if self.surrogate and not (self.walking_trial and is_map_elites(self.approach)):
+            fail(
+                f"surrogate = true is for walking trials of a MAP-Elites approach "
+                f"({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
             )
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
             fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")

@@ -190,7 +190,7 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         lambda: client.create_run(job.experiment_id, run_name=job.trial_key, tags=job.tags())
     ).info.run_id
     spec_values = asdict(job.spec)
-    names = SPEC_PARAMS + (("walks",) if job.spec.walking_trial else ())
+    names = SPEC_PARAMS + (("walks", "surrogate") if job.spec.walking_trial else ())
     params = [Param(k, str(spec_values[k])) for k in names]
     wait(lambda: client.log_batch(run_id, params=params))
     start = time.monotonic()

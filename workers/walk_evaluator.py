@@ -48,6 +48,7 @@ FLOOR_FIELDS = ("status", "mean_distance_cm", "breaks", "reason", "bound_cm",
 """A walk-map row's figures, kept per floor in the walk log."""
 LOG_COUNTERS = (
     "walks", "walk_cache_hits", "walks_reused", "rejected_2d", "rejected_build", "walk_failures",
+    "walks_skipped",
 )  # fmt: skip
 """The walk log's running counts, as the trial's metrics name them."""
 
@@ -162,6 +163,7 @@ class WalkLog:
         floors = {f: {k: np.asarray(state[f"walks.{f}.{k}"]) for k in FLOOR_FIELDS}
                   for f in WALK_ORDER}  # fmt: skip
         counts = np.asarray(state["walks.counts"], np.int64)
+        counts = np.pad(counts, (0, len(LOG_COUNTERS) - len(counts)))  # a log before a count
         log = cls(
             genome=np.asarray(state["walks.genome"], np.float64).reshape(-1, 56),
             iteration=np.asarray(state["walks.iteration"], np.int64),
@@ -260,15 +262,27 @@ class WalkingEvaluator:
         n_angles: crank angles of the 2-D evaluation.
         two_objective: return each floor's loss (B, 2) rather than the worse one (B,).
         walkers: where candidates are walked (`LocalWalkers`, `ActorWalkers`).
+        surrogate: pre-screen the candidates with the learned walk model fitted on the
+            trial's walks (`workers.walk_surrogate`); single-objective only.
     """
 
     def __init__(
-        self, mode: str, n_angles: int, two_objective: bool, walkers: Walkers | None = None
+        self,
+        mode: str,
+        n_angles: int,
+        two_objective: bool,
+        walkers: Walkers | None = None,
+        surrogate: bool = False,
     ) -> None:
         self.mode = mode
         self.n_angles = n_angles
         self.two_objective = two_objective
         self.walkers = walkers or LocalWalkers()
+        self.surrogate = None
+        if surrogate:
+            from linkevo.workers.walk_surrogate import WalkSurrogate
+
+            self.surrogate = WalkSurrogate(mode)
         self.log = WalkLog.empty()
         self._iteration = 0
         self._in_flight: Callable[[], Evaluation] | None = None
@@ -307,12 +321,18 @@ class WalkingEvaluator:
         reused = np.array([r is not None for r in seeded])
         built = np.flatnonzero(checks.buildable & ~reused)
         bars = np.full(len(genomes), np.inf) if bar is None else bar(genomes, base)
+        skipped = np.zeros(0, np.int64)
+        if self.surrogate is not None:
+            self.surrogate.refresh(self.log)
+            worth = self.surrogate.worth_walking(genomes[built], bars[built])
+            built, skipped = built[worth], built[~worth]
         known = self.log.known()
         walks = self.walkers.walk(genomes[built], self.mode, frozenset(known), bars[built])
 
         def collect() -> Evaluation:
             self._in_flight = None
             losses = np.repeat(rejected_loss(base.error, checks)[:, None], 2, axis=1)
+            losses[skipped] = np.inf  # not walked: it enters no archive
             done = [(CandidateWalk("seeded", "", (), 0.0), "") for _ in np.flatnonzero(reused)]
             done += list(walks)
             rows = [seeded[i] for i in np.flatnonzero(reused)]
@@ -324,7 +344,8 @@ class WalkingEvaluator:
                 by_floor = known[walk.key] if walk.stage == "cached" else _by_floor(walk)
                 losses[i] = floor_losses(walk.stage, by_floor)
                 rows.append(by_floor)
-            self._tally(len(genomes) - len(built_now), [w for w, _ in done])
+            self.log.counts["walks_skipped"] += len(skipped)
+            self._tally(len(genomes) - len(built_now) - len(skipped), [w for w, _ in done])
             self.log.append(iteration, genomes[built_now], [w for w, _ in done],
                             [n for _, n in done], rows)  # fmt: skip
             loss = losses if self.two_objective else losses.max(axis=1)
@@ -355,12 +376,17 @@ class WalkingEvaluator:
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """Returns the walk log (the state a resumed trial needs)."""
-        return self.log.state_dict() | {"walks.iteration_now": np.array(self._iteration)}
+        state = self.log.state_dict() | {"walks.iteration_now": np.array(self._iteration)}
+        if self.surrogate is not None:
+            state |= self.surrogate.state_dict()
+        return state
 
     def load_state_dict(self, state: Mapping[str, np.ndarray]) -> None:
-        """Restores `state_dict`'s walk log."""
+        """Restores `state_dict`'s walk log (and the pre-screen's model, refitted)."""
         self.log = WalkLog.from_state(state)
         self._iteration = int(state["walks.iteration_now"])
+        if self.surrogate is not None:
+            self.surrogate.load_state_dict(state, self.log)
 
     def close(self) -> None:
         """Releases the walkers."""

@@ -53,6 +53,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="--fitness Fw: the budget in candidates walked on the simulated robot",
     )
     parser.add_argument(
+        "--surrogate",
+        action="store_true",
+        help="--fitness Fw, a MAP-Elites approach: walk only the candidates the learned walk "
+        "model (fitted on the trial's walks as it goes) predicts could enter the archive",
+    )
+    parser.add_argument(
         "--batch-size",
         type=int,
         default=None,
@@ -167,10 +173,18 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
                 raise CliError("--fitness Fw needs --walks N: its budget in walked candidates")
             if args.evaluations is not None:
                 settings["evaluations"] = args.evaluations
-            spec = TrialSpec.walking(args.approach, args.walks, **settings)
+            spec = TrialSpec.walking(
+                args.approach, args.walks, surrogate=args.surrogate, **settings
+            )
         else:
-            if args.walks is not None:
-                raise CliError(f"--walks is for --fitness Fw only (this trial is {args.fitness})")
+            for given, option in (
+                (args.walks is not None, "--walks"),
+                (args.surrogate, "--surrogate"),
+            ):
+                if given:
+                    raise CliError(
+                        f"{option} is for --fitness Fw only (this trial is {args.fitness})"
+                    )
             if args.evaluations is None:
                 raise CliError(f"--fitness {args.fitness} needs --evaluations N")
             settings.setdefault("batch_size", DEFAULT_BATCH)

@@ -76,6 +76,8 @@ def test_resolved_toml_reads_back_to_an_equal_config(tmp_path):
         ("trials = 2\n", ['approaches=["EA"'], "not a TOML value"),
         ("trials = [1, 2\n", [], "malformed TOML"),
         ("trials = true\n", [], "'trials' = True"),
+        ("surrogate = 1\n", [], "'surrogate' = 1.*true or false"),
+        ('fitnesses = ["Fw"]\nwalks = 9\nsurrogate = true\n', [], "'surrogate'.*MAP-Elites"),
     ],
 )
 def test_bad_configs_name_the_key_and_what_is_allowed(tmp_path, text, overrides, expected):

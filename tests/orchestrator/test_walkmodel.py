@@ -9,6 +9,7 @@ import contextlib
 import io
 import json
 import time
+from pathlib import Path
 
 import pandas as pd
 import pytest
@@ -72,9 +73,8 @@ def test_fit_holds_out_a_whole_repertoire_and_logs_a_model_of_its_own_kind(store
     assert {"walk_model.pt", "walk_model.json", "walk_model.png"} <= names
     weights = client.download_artifacts(fitted["run_id"], "walk_model.pt", str(tmp_path))
     WalkModel.from_state_dict(torch.load(weights, weights_only=True))
-    description = json.loads(
-        open(client.download_artifacts(fitted["run_id"], "walk_model.json", str(tmp_path))).read()
-    )
+    path = client.download_artifacts(fitted["run_id"], "walk_model.json", str(tmp_path))
+    description = json.loads(Path(path).read_text())
     assert description["held_out"] == [runs[fitted["held_out"][0].split("/")[0]]]
     assert "foot_x_0" in description["features"]["names"]
 
@@ -127,7 +127,8 @@ def test_the_explorer_and_pull_mark_predicted_walks_as_predicted(store, fitted, 
         ).perform()
         hovered = browser.find_element(By.ID, "hover-info").text
         assert f"cell {cell}:" in hovered
-        assert f"flat: {guess['predicted_cm']:.1f} ± {guess['spread_cm']:.1f} cm (predicted)" in hovered
+        shown = f"flat: {guess['predicted_cm']:.1f} ± {guess['spread_cm']:.1f} cm (predicted)"
+        assert shown in hovered
     capsys.readouterr()
     pulled = tmp_path / "pulled"
     assert main(["pull", f"{run_id}:{cell}", "--out", str(pulled), "--tracking-uri", uri]) == 0

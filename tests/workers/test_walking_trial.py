@@ -95,6 +95,30 @@ def test_a_resumed_walking_trial_equals_an_uninterrupted_one(tmp_path):
     pd.testing.assert_frame_equal(ours[same], theirs[same])
 
 
+def test_the_surrogate_skips_walks_and_a_resumed_trial_refits_the_same_model(tmp_path, monkeypatch):
+    from linkevo.workers import walk_surrogate
+
+    monkeypatch.setattr(walk_surrogate, "START", 20)  # a model after 20 walks, then every 20
+    monkeypatch.setattr(walk_surrogate, "REFIT_EVERY", 20)
+    spec = TrialSpec.walking("MAP-LIS", 60, seed=5, checkpoint_every=2, surrogate=True)
+    whole = run_trial(spec, make_evaluator(spec), NullRecorder(), tmp_path / "whole")
+    metrics = pd.read_csv(whole.out_dir / "metrics.csv")
+    before = metrics[metrics["walks"] < 20]
+    assert (before["walks_skipped"] == 0).all()  # no model yet: every candidate is walked
+    assert metrics["walks_skipped"].iloc[-1] > 0 and metrics["walks"].iloc[-1] >= 60
+    log = pd.read_parquet(whole.out_dir / "walks.parquet")
+    assert (log["stage"] == "walked").sum() == metrics["walks"].iloc[-1]  # skipped: not built
+    assert np.isfinite(pd.read_parquet(whole.out_dir / "repertoire.parquet")["loss"]).all()
+
+    folder = tmp_path / "cut"
+    crash_at = int(metrics.loc[metrics["walks"] >= 30, "iteration"].iloc[0]) + 1
+    with pytest.raises(RuntimeError, match="went away"):
+        run_trial(spec, Crashing(make_evaluator(spec), fail_at=crash_at), NullRecorder(), folder)
+    assert int(read_npz(folder / "checkpoint" / "state.npz")["surrogate.fits"]) >= 1
+    run_trial(spec, make_evaluator(spec), NullRecorder(), folder, resume=True)
+    assert (folder / "metrics.csv").read_text() == (whole.out_dir / "metrics.csv").read_text()
+
+
 def test_nsga2_walks_the_two_floors_as_its_two_objectives(tmp_path):
     spec = TrialSpec.walking("NSGA2", 30, seed=2)
     result = run_trial(spec, make_evaluator(spec), NullRecorder(), tmp_path)
@@ -131,6 +155,8 @@ def test_broken_walks_lose_to_every_sound_one(tmp_path):
         (lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, walks=5), "for fitness Fw only"),
         (lambda: TrialSpec.walking("MAP-LIS", 0), "walks must be a positive integer"),
         (lambda: TrialSpec.walking("EA", 10, walk_rerank=3), "walk_rerank is for the path"),
+        (lambda: TrialSpec.walking("NSGA2", 10, surrogate=True), "surrogate = true is for"),
+        (lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, surrogate=True), "surrogate = true is for"),
     ],
 )
 def test_a_walking_trial_is_refused_as_specified(make, message):
