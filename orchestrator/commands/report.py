@@ -118,7 +118,9 @@ def compare_handler(args: argparse.Namespace) -> int:
             raise CliError(f"grid id {grid!r} is invalid; allowed: letters, digits, '.', '_', '-'")
         elif uri is None:
             uri = require_store(resolve_tracking_uri(args.tracking_uri))
-    table = compare_grids(uri, args.grid_a, args.grid_b, args.experiment)
+    table, unlike = compare_grids(uri, args.grid_a, args.grid_b, args.experiment)
+    for warning in unlike:
+        print(f"warning: {warning}; the comparison is not like for like", file=sys.stderr)
     if table.empty:
         print(f"grids {args.grid_a} and {args.grid_b} share no finished approach and fitness")
         return 0

@@ -23,22 +23,52 @@ COLUMNS: tuple[str, ...] = (
 
 def compare_grids(
     tracking_uri: str | None, grid_a: str, grid_b: str, experiment: str = "linkevo"
-) -> pd.DataFrame:
+) -> tuple[pd.DataFrame, list[str]]:
     """Returns `compare_trials` of two grids, each a grid id in the store or the path of a
-    report's `trials.csv` (a published grid compares without its store).
+    report's `trials.csv` (a published grid compares without its store), and the
+    `differences` that make the comparison unlike for like.
 
     Raises:
         NotFound: when a grid is not in the store.
         TrialsTableError: when a trials table lacks the columns a report writes.
     """
+    sides = []
     with tempfile.TemporaryDirectory(prefix="linkevo-compare-") as cache:
-        a, b = (
-            finished_trials(read_trials_csv(grid))
-            if is_trials_csv(grid)
-            else load_grid(tracking_uri, grid, Path(cache) / grid, experiment).finished()
-            for grid in (grid_a, grid_b)
-        )
-    return compare_trials(a, b)
+        for grid in (grid_a, grid_b):
+            if is_trials_csv(grid):
+                sides.append((finished_trials(read_trials_csv(grid)), None))
+            else:
+                data = load_grid(tracking_uri, grid, Path(cache) / grid, experiment)
+                sides.append((data.finished(), data.config.get("mode")))
+    (a, mode_a), (b, mode_b) = sides
+    table = compare_trials(a, b)
+    return table, differences(a, b, table, mode_a, mode_b)
+
+
+def differences(
+    a: pd.DataFrame, b: pd.DataFrame, table: pd.DataFrame, mode_a: str | None, mode_b: str | None
+) -> list[str]:
+    """Returns a warning per way the two grids' compared cells differ in what they ran:
+    the mode (when both are known: a trials.csv does not say), the budget (the median of
+    `final_evaluations` per approach and fitness, where both tables have it) and the
+    trials per cell."""
+    out = []
+    if mode_a and mode_b and mode_a != mode_b:
+        out.append(f"the grids ran in different modes: a {mode_a}, b {mode_b}")
+    for row in table.itertuples():
+        cell = f"{row.approach} {row.fitness}"
+        if row.n_a != row.n_b:
+            out.append(f"{cell}: {row.n_a} trials in a, {row.n_b} in b")
+        if "final_evaluations" in a and "final_evaluations" in b:
+            budgets = [
+                float(np.median(d.final_evaluations[(d.fitness == row.fitness)
+                                                    & (d.approach == row.approach)]))
+                for d in (a, b)
+            ]  # fmt: skip
+            if budgets[0] != budgets[1] and not np.isnan(budgets).any():
+                out.append(f"{cell}: a budget of {budgets[0]:,.0f} evaluations in a, "
+                           f"{budgets[1]:,.0f} in b")  # fmt: skip
+    return out
 
 
 def is_trials_csv(grid: str) -> bool:

@@ -400,8 +400,8 @@ def test_compare_puts_two_grids_side_by_side(tmp_path, capsys):
     second = write_grid(tmp_path / "b", GridSpec(grid_id="g0second", seed=2), server_uri=first.uri)
     from linkevo.orchestrator.report.compare import compare_grids
 
-    table = compare_grids(first.uri, "g0first", "g0second")
-    assert len(table) == 4 * 2
+    table, unlike = compare_grids(first.uri, "g0first", "g0second")
+    assert len(table) == 4 * 2 and unlike == []  # the same budget, mode and trials
     for row in table.itertuples():
         x, y = (
             np.array(
@@ -436,8 +436,8 @@ def test_compare_reads_a_reports_trials_table(tmp_path, capsys):
 
     csv = tmp_path / "trials.csv"
     load_grid(first.uri, "g0second", tmp_path / "cache").trials.to_csv(csv, index=False)
-    expected = compare_grids(first.uri, "g0first", "g0second")
-    pd.testing.assert_frame_equal(compare_grids(first.uri, "g0first", str(csv)), expected)
+    expected = compare_grids(first.uri, "g0first", "g0second")[0]
+    pd.testing.assert_frame_equal(compare_grids(first.uri, "g0first", str(csv))[0], expected)
     out = tmp_path / "cmp.csv"
     assert (
         main(["compare", "g0first", str(csv), "--tracking-uri", first.uri, "--out", str(out)]) == 0
@@ -448,6 +448,16 @@ def test_compare_reads_a_reports_trials_table(tmp_path, capsys):
     pd.DataFrame({"approach": ["EA"]}).to_csv(tmp_path / "bad.csv", index=False)
     assert main(["compare", str(csv), str(tmp_path / "bad.csv")]) == 2
     assert "lacks the columns fitness, status, best_loss" in capsys.readouterr().err
+
+
+def test_compare_warns_when_the_grids_ran_differently(tmp_path, capsys):
+    first = write_grid(tmp_path / "a", GridSpec(grid_id="g0first", seed=1))
+    spec = GridSpec(grid_id="g0short", seed=2, trials=3, iterations=4)
+    write_grid(tmp_path / "b", spec, server_uri=first.uri)
+    assert main(["compare", "g0first", "g0short", "--tracking-uri", first.uri]) == 0
+    err = capsys.readouterr().err
+    assert "warning: EA Fp: 4 trials in a, 3 in b; the comparison is not like for like" in err
+    assert "warning: EA Fp: a budget of 300 evaluations in a, 200 in b" in err
 
 
 def test_a_report_that_fails_half_way_leaves_the_previous_one_whole(tmp_path, monkeypatch):
