@@ -3,11 +3,13 @@
 Run: `.venv/bin/python benchmarks/walkmap_fidelity.py --run-id RUN_ID [--tracking-uri URI]
 [--cells 24]`: RUN_ID is a repertoire trial (the benchmark's: MAP-LIS's first robot's trial
 of the paper-mode study grid, `docs/results.md`). The same `--cells` buildable cells (every
-k-th by loss) are walked on each floor, on one core, three ways: the Table I protocol
+k-th by loss) are walked on each floor, on one core, four ways: the Table I protocol
 (`sim.walking.field_trials`: five 10-s walks from hand-placed starts at the lean model's 2-ms
-step, their mean), one Table I walk from the unperturbed start, and the walk-map walk
-(`sim.walk_map.walk_map_settings`: one walk at 4 ms with the sparse Jacobian). Per floor and
-way it prints the time per cell and its ratio to the protocol's, and the agreement with the
+step, their mean), one Table I walk from the unperturbed start, the walk-map walk
+(`sim.walk_map.walk_map_settings`: one walk at 4 ms with the sparse Jacobian), and the
+walking fitness's walk (`sim.walk_fitness.search_walk_settings`: the walk-map walk for 5 s,
+stopped once the robot has broken, its distance doubled to 10 s). Per floor and way it
+prints the time per cell and its ratio to the protocol's, and the agreement with the
 protocol: Spearman's rank correlation of the distances (over every cell, and over the cells
 that do not break in the protocol), the median and largest difference, and the share of
 cells whose break verdict agrees.
@@ -27,11 +29,12 @@ from scipy.stats import spearmanr
 from linkevo.orchestrator.walkmap import Selection
 from linkevo.sim.leg import leg_from_genome
 from linkevo.sim.robot import FLOORS
+from linkevo.sim.walk_fitness import search_walk_settings
 from linkevo.sim.walk_map import WALK_SECONDS, walk_map_settings
 from linkevo.sim.walking import WalkSettings, field_trials, walk
 from linkevo.workers.store.runs import RunStore
 
-WAYS = ("Table I protocol (5 walks)", "one Table I walk", "walk-map walk")
+WAYS = ("Table I protocol (5 walks)", "one Table I walk", "walk-map walk", "F_w walk")
 
 
 def main() -> None:
@@ -60,11 +63,13 @@ def main() -> None:
             got.setdefault((WAYS[0], floor), []).append(
                 (mean, any(w.breaks for w in walks), time.perf_counter() - start)
             )
-            for way, settings in zip(WAYS[1:], (table_one, walk_map_settings()), strict=True):
+            ways = (table_one, walk_map_settings(), search_walk_settings())
+            for way, settings in zip(WAYS[1:], ways, strict=True):
                 start = time.perf_counter()
                 w = walk(leg, FLOORS[floor], settings=settings)
                 seconds = time.perf_counter() - start
-                got.setdefault((way, floor), []).append((w.distance_m * 100, w.breaks, seconds))
+                per_10_s = w.distance_m * 100 * WALK_SECONDS / settings.seconds
+                got.setdefault((way, floor), []).append((per_10_s, w.breaks, seconds))
     for floor in FLOORS:
         protocol = np.array(got[(WAYS[0], floor)])
         sound = ~protocol[:, 1].astype(bool)
