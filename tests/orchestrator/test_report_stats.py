@@ -119,3 +119,11 @@ def test_one_rule_judges_every_claim():
     assert similar(row(0.05, 0.00, 0.15, 0.01)) == NOT_REPRODUCED
     assert weakest([REPRODUCED, DIRECTION_ONLY, REPRODUCED]) == DIRECTION_ONLY
     assert weakest([REPRODUCED, CONTRADICTED, NOT_REPRODUCED]) == CONTRADICTED
+
+
+def test_the_rules_power_grows_with_trials_and_effect_and_is_alpha_without_one():
+    from linkevo.orchestrator.report.stats import rule_power
+
+    assert rule_power(30, 1, 0.5, draws=4000) == pytest.approx(0.05, abs=0.015)
+    assert rule_power(10, 15, 0.71) < rule_power(30, 15, 0.71) < rule_power(30, 1, 0.71)
+    assert rule_power(30, 15, 0.9) > 0.95
