@@ -26,6 +26,11 @@ carry it."""
 PIN_FORCE_LIMIT_N = 60.0
 """The 99th-percentile pin force above which a LEGO Technic pin joint is taken to fail
 (beams spread and the pin walks out); an estimate, see docs/walking.md."""
+FOOT_DEVIATION_MM = 1.0
+"""A foot further than this from where its linkage puts it is flagged (`caveats`)."""
+PITCH_CAVEAT_DEG = 20.0
+"""A frame pitching further than this is flagged: the robot rocks, and how far it gets
+depends on contacts the simulation models least well (`caveats`)."""
 
 
 @dataclass
@@ -139,9 +144,35 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "pin_force_p99_n": rounded(worst(w.pin_force_n[2] for w in walks)),
         "pin_force_max_n": rounded(worst(w.pin_force_n[3] for w in walks)),
         "loop_error_max_mm": rounded(worst(w.loop_error_mm for w in walks), 3),
+        "foot_deviation_max_mm": rounded(worst(w.foot_deviation_mm for w in walks), 3),
         "timestep_ms": [round(w.timestep * 1000, 3) for w in walks],
         "frame_contact_share": rounded(worst(w.frame_contact for w in walks), 3),
+        "caveats": caveats(walks),
     }  # fmt: skip
+
+
+def caveats(walks: list[Walk]) -> list[str]:
+    """Returns what a builder should know before trusting these walks' distances (empty
+    when nothing): a walk beyond the level-body no-slip bound, a frame that pitches past
+    `PITCH_CAVEAT_DEG`, feet that stray past `FOOT_DEVIATION_MM` from their linkage's path."""
+    out = []
+    beyond = [w for w in walks if math.isfinite(w.distance_m) and w.distance_m > w.bound_m]
+    if beyond:
+        out.append(
+            f"{len(beyond)} of {len(walks)} walks go beyond the level-body bound "
+            f"({beyond[0].bound_m * 100:.0f} cm): the robot slides or hops forwards, which a "
+            "LEGO robot on a real floor may not"
+        )
+    pitch = max((w.max_pitch_deg for w in walks if math.isfinite(w.max_pitch_deg)), default=0.0)
+    if pitch > PITCH_CAVEAT_DEG:
+        out.append(f"the frame pitches up to {pitch:.0f}°: the robot rocks, and its distance "
+                   "rests on contacts the simulation models least well")  # fmt: skip
+    stray = max((w.foot_deviation_mm for w in walks if math.isfinite(w.foot_deviation_mm)),
+                default=0.0)  # fmt: skip
+    if stray > FOOT_DEVIATION_MM:
+        out.append(f"feet stray up to {stray:.1f} mm from their linkage's path (more than "
+                   f"{FOOT_DEVIATION_MM:g} mm)")  # fmt: skip
+    return out
 
 
 def rounded(value: float | None, digits: int = 2) -> float | None:

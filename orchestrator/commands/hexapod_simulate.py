@@ -143,13 +143,11 @@ def _simulation_text(source, robot: str, result: dict) -> str:
             f"  motor torque {result['torque_p95_of_stall']:.0%} of stall (95th pct), "
             f"peak {result['torque_max_of_stall']:.0%}; pin force p50/p95/p99 "
             f"{result['pin_force_p50_n']}/{result['pin_force_p95_n']}/"
-            f"{result['pin_force_p99_n']} N; loop closure within {result['loop_error_max_mm']} mm"
+            f"{result['pin_force_p99_n']} N; loop closure within {result['loop_error_max_mm']} "
+            f"mm, feet within {result['foot_deviation_max_mm']} mm of their path"
         )
-    if result.get("beyond_bound"):
-        lines.append(
-            "  beyond the no-slip bound, which holds for a level body: the robot rocks "
-            f"(pitch up to {result['max_pitch_deg']}°) and its feet slip; trust the distance less"
-        )
+    for caveat in result.get("caveats", []):
+        lines.append(f"  caveat: {caveat}")
     verdict = f"BREAKS: {result['reason']}" if result["breaks"] else "walks"
     lines.append(f"  {verdict}")
     if "run_id" in result:

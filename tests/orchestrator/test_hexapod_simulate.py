@@ -88,6 +88,10 @@ def test_simulate_prints_the_table_one_json_and_logs_a_simulated_field_trial(sto
                 "loop_error_max_mm", "body_height_cm", "foot_slip_mm_s"):  # fmt: skip
         assert key in result
     assert result["model"] == "lean"
+    assert 0 <= result["foot_deviation_max_mm"] < 1.0  # the lean model keeps the feet on path
+    assert isinstance(result["caveats"], list)
+    beyond = any(d is not None and d > result["bound_cm"] for d in result["distance_cm"])
+    assert beyond == any("level-body bound" in c for c in result["caveats"])
     run = MlflowClient(uri).get_run(result["run_id"])
     assert run.data.params["simulated"] == "physics"
     assert run.data.params["model"] == "lean"

@@ -101,3 +101,23 @@ def test_the_floors_losses_fall_in_their_tiers():
     graded = rejected_loss(np.array([12, 0, 0]), checks)
     assert graded.tolist() == [REJECTED_LOSS + 13, REJECTED_LOSS + 3, REJECTED_LOSS + 1]
     assert graded.min() > NO_LEG_LOSS > BROKEN_LOSS - 300.0 > 0.0  # the tiers never overlap
+
+
+def test_caveats_name_what_a_builder_should_doubt():
+    from dataclasses import replace
+
+    from linkevo.sim.walk_figures import caveats
+    from linkevo.sim.walking import Walk
+
+    plain = Walk(
+        distance_m=0.5, bound_m=1.0, heading_drift_deg=0.0, body_height_m=0.1, clearance_m=0.05,
+        max_pitch_deg=5.0, max_roll_deg=2.0, foot_slip_mm_s=1.0, torque_p95=0.3, torque_max=0.5,
+        saturated=np.zeros(6), max_lag_deg=3.0, pin_force_n=(1.0, 2.0, 3.0, 4.0),
+        loop_error_mm=0.01, frame_contact=0.0, breaks=False, reason="", trace={},
+        foot_deviation_mm=0.1,
+    )  # fmt: skip
+    assert caveats([plain]) == []
+    far = replace(plain, distance_m=1.5)
+    assert "1 of 2 walks go beyond the level-body bound (100 cm)" in caveats([plain, far])[0]
+    assert "pitches up to 31°" in caveats([replace(plain, max_pitch_deg=31.0)])[0]
+    assert "feet stray up to 3.8 mm" in caveats([replace(plain, foot_deviation_mm=3.8)])[0]
