@@ -93,7 +93,9 @@ def simulate_handler(args: argparse.Namespace) -> int:
     )
     pictures = []
     if args.out is not None and walks:
-        title = f"{source.approach} {args.robot} robot, {args.floor} floor, repeat 1"
+        what = (f"{source.approach} {args.robot} robot" if source.approach != "unknown"
+                else Path(args.linkage).name)  # fmt: skip
+        title = f"{what}, {args.floor} floor, repeat 1"
         pictures = write_pictures(walks[0], args.out, title)
     if not args.no_log:
         result["run_id"] = log_simulated(uri, source, args.robot, result, args.seed, pictures)

@@ -48,8 +48,11 @@ def study_title(grid: GridData, fitness: str | None = None) -> str:
 
 
 def thousands(ax, axis: str = "x") -> None:
-    """Writes an axis's tick labels in thousands ("200k"), which stay apart at any width."""
-    formatter = FuncFormatter(lambda v, _: f"{v / 1000:,.0f}k" if v else "0")
+    """Writes an axis's tick labels in thousands ("200k", "1.5k"), which stay apart at any
+    width and never repeat (a tick between thousands keeps its decimal)."""
+    formatter = FuncFormatter(
+        lambda v, _: f"{v / 1000:,.{0 if v % 1000 == 0 else 1}f}k" if v else "0"
+    )
     (ax.xaxis if axis == "x" else ax.yaxis).set_major_formatter(formatter)
 
 

@@ -127,3 +127,17 @@ def test_the_rules_power_grows_with_trials_and_effect_and_is_alpha_without_one()
     assert rule_power(30, 1, 0.5, draws=4000) == pytest.approx(0.05, abs=0.015)
     assert rule_power(10, 15, 0.71) < rule_power(30, 15, 0.71) < rule_power(30, 1, 0.71)
     assert rule_power(30, 15, 0.9) > 0.95
+
+
+def test_thousands_ticks_never_repeat():
+    from matplotlib.figure import Figure
+
+    from linkevo.orchestrator.report.figures import thousands
+
+    ax = Figure().add_subplot()
+    ax.set_xlim(0, 2000)
+    ax.set_xticks([0, 500, 1000, 1500, 2000])
+    thousands(ax)
+    ax.figure.canvas.draw()
+    labels = [t.get_text() for t in ax.get_xticklabels()]
+    assert labels == ["0", "0.5k", "1k", "1.5k", "2k"]

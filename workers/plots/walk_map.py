@@ -35,6 +35,7 @@ def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> 
     walked = frame[frame["status"] == "walked"]
     top = walked.loc[~walked["breaks"], "mean_distance_cm"]
     high = max(float(np.nanquantile(top, 0.98)), 1.0) if top.notna().any() else 1.0
+    low = min(float(np.nanquantile(top, 0.02)), 0.0) if top.notna().any() else 0.0
     fig = Figure(figsize=(4.0 * len(floors) + 0.8, 4.2))
     width = 0.84 / len(floors)
     shown = None
@@ -47,7 +48,7 @@ def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> 
         ok = ~part["breaks"].to_numpy(dtype=bool)
         distance[rows[ok], cols[ok]] = part["mean_distance_cm"].to_numpy(dtype=float)[ok]
         broken[rows[~ok], cols[~ok]] = 1.0
-        shown = ax.imshow(distance, origin="lower", cmap=DISTANCE_CMAP, vmin=0.0, vmax=high)
+        shown = ax.imshow(distance, origin="lower", cmap=DISTANCE_CMAP, vmin=low, vmax=high)
         ax.imshow(broken, origin="lower", cmap=BROKEN, vmin=0.0, vmax=1.0)
         ax.set_title(f"{floor}: {int(ok.sum())} walk, {int((~ok).sum())} break (red)", fontsize=8)
         x_axis, y_axis = axis_names(space)
@@ -58,7 +59,7 @@ def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> 
     colour_bar = fig.colorbar(shown, cax=bar, extend="both")
     seconds = float(frame["seconds"].max()) if len(frame) else 10.0
     colour_bar.set_label(
-        f"distance in {seconds:g} s, cm (brighter is further; backwards is darkest)", fontsize=6
+        f"distance in {seconds:g} s, cm (brighter is further; below 0: backwards)", fontsize=6
     )
     colour_bar.ax.tick_params(labelsize=6)
     fig.suptitle(f"{name}: walk map (simulated robot, one walk per cell)", fontsize=9)
