@@ -295,7 +295,9 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
             "paths evenly spaced along the final Pareto front (fewer when the front holds "
             "fewer linkages); EA: the 5 best paths of the final population. Each path is "
             "scaled to fit its cell; the corner number is its size (the larger of width "
-            "and height, in LEGO units); colour is the single-objective loss."
+            "and height, in LEGO units); colour is the single-objective loss. Where a "
+            "linkage fails to assemble at some crank angles, its path has a gap there "
+            "(the foot goes nowhere), not a straight chord."
         ),
         figure=fig,
     )

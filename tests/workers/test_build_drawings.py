@@ -6,6 +6,7 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pandas as pd
 import pytest
 from PIL import Image
 
@@ -74,3 +75,21 @@ def test_template_prints_at_one_to_one_on_a4_pages_covering_the_build(doc, tmp_p
     assert len(boxes) == len(tiles)  # a page per tile
     assert all(float(w) == pytest.approx(595.28, abs=0.01) for w, _ in boxes)  # A4 in points
     assert all(float(h) == pytest.approx(841.89, abs=0.01) for _, h in boxes)
+
+
+def test_a_path_is_drawn_with_gaps_where_its_linkage_fails():
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    from linkevo.workers.plots.repertoire import draw_paths
+
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    x, y = np.cos(angles), 0.5 * np.sin(angles)
+    x[10:25] = np.nan  # the linkage fails over 15 of its 40 angles
+    chosen = pd.DataFrame({"foot_x": [x, np.cos(angles)], "foot_y": [y, np.sin(angles)],
+                           "row": [0, 0], "col": [0, 1], "loss": [1.0, 2.0]})  # fmt: skip
+    lines = draw_paths(Figure().add_subplot(), chosen, (1, 2), Normalize(0, 3))
+    segments = lines.get_segments()
+    assert len(segments) == 2  # the failing path one open run, the whole one closed
+    assert len(segments[0]) == 25 and not np.allclose(segments[0][0], segments[0][-1])
+    assert len(segments[1]) == 41 and np.allclose(segments[1][0], segments[1][-1])

@@ -78,26 +78,30 @@ def select_paths(archive: pd.DataFrame, approach: str) -> pd.DataFrame:
 
 
 def draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize):
-    """Draws each chosen path scaled into its grid cell, with its size in the corner.
+    """Draws each chosen path scaled into its grid cell, with its size in the corner; the
+    crank angles where the linkage fails are left as gaps (a path is closed only where
+    its last and first angles both assemble).
 
     Returns the paths' LineCollection (coloured by loss under `norm`).
     """
-    segments = []
-    for foot_x, foot_y, row, col in zip(
-        chosen.foot_x, chosen.foot_y, chosen.row, chosen.col, strict=True
+    segments, colours = [], []
+    for foot_x, foot_y, row, col, loss in zip(
+        chosen.foot_x, chosen.foot_y, chosen.row, chosen.col, chosen.loss, strict=True
     ):
         x, y = np.asarray(foot_x, dtype=float), np.asarray(foot_y, dtype=float)
         keep = np.isfinite(x) & np.isfinite(y)
-        x, y = np.append(x[keep], x[keep][0]), np.append(y[keep], y[keep][0])
-        size = max(np.ptp(x), np.ptp(y))
+        if not keep.any():
+            continue
+        size = max(np.ptp(x[keep]), np.ptp(y[keep]))
         scale = 0.8 / size if size > 0 else 1.0
-        cx, cy = (x.max() + x.min()) / 2, (y.max() + y.min()) / 2
-        segments.append(
-            np.column_stack([col + 0.5 + (x - cx) * scale, row + 0.5 + (y - cy) * scale])
-        )
+        cx, cy = (x[keep].max() + x[keep].min()) / 2, (y[keep].max() + y[keep].min()) / 2
+        points = np.column_stack([col + 0.5 + (x - cx) * scale, row + 0.5 + (y - cy) * scale])
+        for run in assembled_runs(keep):
+            segments.append(points[run])
+            colours.append(float(loss))
         ax.text(col + 0.96, row + 0.04, f"{size:.1f}", ha="right", va="bottom", fontsize=5)
     lines = LineCollection(segments, cmap=PATH_CMAP, norm=norm, linewidths=0.9)
-    lines.set_array(chosen.loss.to_numpy(dtype=float))
+    lines.set_array(np.array(colours))
     ax.add_collection(lines)
     rows, cols = shape
     ax.vlines(np.arange(1, cols), 0, rows, color="0.85", lw=0.5)
@@ -108,6 +112,28 @@ def draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize
     ax.set_yticks([])
     ax.set_aspect("equal")
     return lines
+
+
+def assembled_runs(keep: np.ndarray) -> list[np.ndarray]:
+    """Returns the index runs of consecutive assembled crank angles of a cyclic path
+    (keep: (A,) bool), each to draw as one line: the whole turn closed when every angle
+    assembles, else each run on its own (a run through the last angle continues into the
+    first)."""
+    n = len(keep)
+    if keep.all():
+        return [np.append(np.arange(n), 0)]
+    start = int(np.flatnonzero(~keep)[0])  # begin at a gap, so no run wraps unseen
+    order = (np.arange(n) + start) % n
+    runs, current = [], []
+    for i in order:
+        if keep[i]:
+            current.append(i)
+        elif current:
+            runs.append(np.array(current))
+            current = []
+    if current:
+        runs.append(np.array(current))
+    return [r for r in runs if len(r) > 1]
 
 
 def view_frame(view: dict[str, np.ndarray]) -> pd.DataFrame:
