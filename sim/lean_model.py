@@ -15,7 +15,9 @@ on the parts that meet the floor.
 The coupled parts get an armature (`CONTACT_INERTIA_KG`): MuJoCo's soft contacts scale with
 the inertia behind the contact, and without it a few grams of beam sink into a soft floor
 far deeper than the crank-driven mechanism would let them (docs/walking.md compares the two
-models). It adds no weight and, reflected to the crank, under 0.1 % of the rotor's inertia.
+models). It adds no weight; reflected to the crank it is a few percent of the rotor's
+inertia over the turn (more at fast-swinging poses), which moves carpet walks by a few
+centimetres (`benchmarks/armature_effect.py`, docs/walking.md).
 """
 
 from __future__ import annotations
