@@ -21,9 +21,10 @@ import torch
 from torch import nn
 
 from linkevo.algorithms.aurora_model import torch_threads
+from linkevo.sim.walk_features import TARGET_FLOORS
 
-FLOORS: tuple[str, str] = ("flat", "carpet")
-"""The floors of the model's outputs, in order."""
+FLOORS = TARGET_FLOORS
+"""The floors of the model's outputs, in order (`sim.walk_features.walk_targets`')."""
 MEMBERS = 5
 """Networks in the ensemble."""
 HIDDEN: tuple[int, ...] = (128, 64)

@@ -3,10 +3,8 @@ from the store's walk maps, a fit measured on whole held-out repertoires, the mo
 as an MLflow run of its own kind (`walk_model`), and whole repertoires predicted and logged
 beside their walk maps as `walkpred.parquet`.
 
-Training data are the rows of walk maps (`linkevo walkmap`, or a walking trial's own),
-each (cell, floor) that was walked: its distance credited per 10 s
-(`sim.walk_fitness.credited_cm`) where the robot does not break, and whether it breaks.
-Cells not walked on a floor (not buildable, skipped, failed) teach nothing about it.
+Training data are the rows of walk maps (`linkevo walkmap`, or a walking trial's own):
+`sim.walk_features.walk_targets` of every walked cell.
 """
 
 from __future__ import annotations
@@ -21,8 +19,12 @@ import pandas as pd
 
 from linkevo.algorithms.walk_model import FLOORS, Prediction, WalkData, WalkModel
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.walk_features import FEATURE_NAMES, FEATURES_VERSION, walk_features
-from linkevo.sim.walk_fitness import credited_cm
+from linkevo.sim.walk_features import (
+    FEATURE_NAMES,
+    FEATURES_VERSION,
+    walk_features,
+    walk_targets,
+)
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 from linkevo.workers.store.runs import NotFound, RunStore, TrialRun
@@ -41,24 +43,6 @@ class WalkedRepertoire:
     cells: np.ndarray
     genomes: np.ndarray
     data: WalkData
-
-
-def walk_labels(walks: pd.DataFrame, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Returns what a walk map says of `cells` (N,) on each of `FLOORS`: distance (N, 2) cm
-    per 10 s, NaN where not walked or broken there, and breaks (N, 2) 1.0/0.0, NaN where
-    not walked."""
-    at = {int(c): i for i, c in enumerate(cells)}
-    distance = np.full((len(cells), len(FLOORS)), np.nan)
-    breaks = np.full((len(cells), len(FLOORS)), np.nan)
-    walked = walks[(walks["status"] == "walked") & walks["cell"].isin(at)]
-    for row in walked.to_dict("records"):
-        if row["floor"] not in FLOORS:
-            continue
-        i, k = at[int(row["cell"])], FLOORS.index(row["floor"])
-        breaks[i, k] = float(bool(row["breaks"]))
-        if not row["breaks"]:
-            distance[i, k] = credited_cm(row)
-    return distance, breaks
 
 
 def walked_repertoires(store: RunStore, refs: list[str]) -> list[WalkedRepertoire]:
@@ -88,7 +72,7 @@ def walked_repertoires(store: RunStore, refs: list[str]) -> list[WalkedRepertoir
                     continue
                 cells = table["cell"].to_numpy(dtype=np.int64)
                 genomes = np.stack(table["genome"].to_numpy()).astype(np.float64)
-                distance, breaks = walk_labels(walks, cells)
+                distance, breaks = walk_targets(walks, cells)
                 features = walk_features(genomes, trial.mode)
                 out.append(
                     WalkedRepertoire(trial, cells, genomes, WalkData(features, distance, breaks))
@@ -281,11 +265,10 @@ def load_model(store: RunStore, run_id: str | None = None) -> tuple[WalkModel, s
             )
         run_id = runs[0].info.run_id
     else:
-        layout.checked_id(run_id, "--model")
         try:
             run = store.client.get_run(run_id)
-        except Exception as exc:
-            raise NotFound(f"no run {run_id!r} in the store {store.uri}") from exc
+        except Exception as exc:  # MLflow's error for an unknown or malformed id
+            raise NotFound(f"--model {run_id!r}: no such run in the store {store.uri}") from exc
         if run.data.tags.get(layout.KIND) != layout.WALK_MODEL:
             raise NotFound(f"run {run_id} is not a walk model (linkevo walkmodel fit makes one)")
     features = store.client.get_run(run_id).data.tags.get("features")

@@ -21,12 +21,18 @@ The features of one linkage (`FEATURE_NAMES`, in modules or degrees):
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from linkevo.sim.decoding import decode
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.physical import physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES
+from linkevo.sim.walk_fitness import credited_cm
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 FEATURES_VERSION = "linkevo.walk-features/1"
 """What `walk_features` computes; a walk model records it and refuses other inputs."""
@@ -47,6 +53,8 @@ FEATURE_NAMES: tuple[str, ...] = (
     *SCALARS,
 )
 """The columns of `walk_features`, in order."""
+TARGET_FLOORS: tuple[str, str] = ("flat", "carpet")
+"""The floors of `walk_targets`' columns, in order."""
 
 
 def walk_features(genomes: np.ndarray, mode: str = "paper") -> np.ndarray:
@@ -117,3 +125,23 @@ def _stance_bands(x: np.ndarray, y: np.ndarray, valid: np.ndarray) -> list[np.nd
             np.where(down & (step < 0), 1.0, 0.0).sum(axis=1) / np.maximum(count, 1),
         ]
     return out
+
+
+def walk_targets(walks: pd.DataFrame, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Returns what walk-map rows (`sim.walk_map.COLUMNS`) say of `cells` (N,) on each of
+    `TARGET_FLOORS`, what the walk model learns: distance (N, 2) cm per 10 s, credited at
+    most the level-body bound (`sim.walk_fitness.credited_cm`), NaN where not walked there
+    or broken; breaks (N, 2) 1.0 or 0.0, NaN where not walked there (not buildable,
+    skipped, failed: such a row teaches nothing)."""
+    at = {int(c): i for i, c in enumerate(cells)}
+    distance = np.full((len(cells), len(TARGET_FLOORS)), np.nan)
+    breaks = np.full((len(cells), len(TARGET_FLOORS)), np.nan)
+    walked = walks[(walks["status"] == "walked") & walks["cell"].isin(at)]
+    for row in walked.to_dict("records"):
+        if row["floor"] not in TARGET_FLOORS:
+            continue
+        i, k = at[int(row["cell"])], TARGET_FLOORS.index(row["floor"])
+        breaks[i, k] = float(bool(row["breaks"]))
+        if not row["breaks"]:
+            distance[i, k] = credited_cm(row)
+    return distance, breaks

@@ -23,9 +23,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from linkevo.algorithms.walk_model import FLOORS, WalkData, WalkModel
-from linkevo.sim.walk_features import FEATURE_NAMES, walk_features
-from linkevo.sim.walk_fitness import credited_cm
+from linkevo.algorithms.walk_model import WalkData, WalkModel
+from linkevo.sim.walk_features import FEATURE_NAMES, walk_features, walk_targets
 
 START = 200
 """Walks logged before the model first screens."""
@@ -94,23 +93,14 @@ class WalkSurrogate:
 
 
 def training_data(log, rows: int, mode: str) -> WalkData:
-    """Returns the walks of the first `rows` candidates of a walk log that were walked:
-    per floor of `FLOORS`, the distance credited per 10 s where the robot does not break,
-    and whether it breaks (NaN where that floor was not walked)."""
+    """Returns the walks of the first `rows` candidates of a walk log that were walked, as
+    the walk model learns them (`sim.walk_features.walk_targets`)."""
+    import pandas as pd
+
     walked = np.flatnonzero(log.stage[:rows] == "walked")
-    distance = np.full((len(walked), len(FLOORS)), np.nan)
-    breaks = np.full((len(walked), len(FLOORS)), np.nan)
-    for k, floor in enumerate(FLOORS):
-        columns = log.floors[floor]
-        for j, i in enumerate(walked):
-            if columns["status"][i] != "walked":
-                continue
-            broke = bool(columns["breaks"][i])
-            breaks[j, k] = float(broke)
-            if not broke:
-                row = {
-                    name: columns[name][i] for name in ("mean_distance_cm", "bound_cm", "seconds")
-                }
-                distance[j, k] = credited_cm(row)
-    features = walk_features(log.genome[walked], mode)
-    return WalkData(features, distance, breaks)
+    frame = pd.DataFrame(
+        [{**row, "cell": j} for j, i in enumerate(walked) for row in log.rows(i).values()],
+        columns=["cell", "floor", "status", "breaks", "mean_distance_cm", "bound_cm", "seconds"],
+    )
+    distance, breaks = walk_targets(frame, np.arange(len(walked)))
+    return WalkData(walk_features(log.genome[walked], mode), distance, breaks)
