@@ -387,7 +387,7 @@ def test_a_walking_grid_starts_from_a_walked_repertoire(store, lis_map, tmp_path
     from tests.helpers.grid import tiny_grid
 
     uri, runs = store
-    walked, _ = lis_map
+    walked = _walk_map(uri, runs["MAP-LIS"], tmp_path / "map")  # as the tests before left it
     usable = walked[walked["status"] == "walked"].groupby("cell")["floor"].nunique()
     seeded_cells = set(usable[usable == 2].index)
     assert seeded_cells  # the map walked some cells on both floors
