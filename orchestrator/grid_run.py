@@ -9,7 +9,8 @@ import statistics
 from mlflow.entities import Param
 from mlflow.tracking import MlflowClient
 
-from linkevo.orchestrator.config import GridConfig, flatten, to_toml
+from linkevo.orchestrator.config import GridConfig
+from linkevo.orchestrator.config_text import flatten, to_toml
 from linkevo.orchestrator.grid import Grid
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.runs import RunStore

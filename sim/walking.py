@@ -11,10 +11,9 @@ within ±5 mm, each leg's phase within the alignment tolerance (±3°).
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
+import functools
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import mujoco
@@ -33,8 +32,9 @@ from linkevo.sim.robot import (
     Frame,
     Motor,
 )
-from linkevo.sim.robot_model import RobotModel, control_tick
-from linkevo.sim.walk_figures import BreakWatch, break_reason, foot_slip, wrap_angle, yaw_of
+from linkevo.sim.robot_model import RobotModel, control_tick, quiet_engine
+from linkevo.sim.walk_figures import break_reason, foot_slip, wrap_angle, yaw_of
+from linkevo.sim.walk_records import WalkRecords, WalkWatch
 
 MODELS = dict(
     zip(ROBOT_MODELS, ((build_lean_robot, LEAN_TIMESTEP_S), (build_robot, TIMESTEP_S)), strict=True)
@@ -191,102 +191,13 @@ def walk(
         robot = build(legs, start, floor, frame=frame, motor=motor, timestep=settings.step)
         if settings.sparse:
             robot.model.opt.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE
-        with _quiet_engine():
+        with quiet_engine():
             result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
         finer = settings.step / 2
         if not result.diverged or finer < MIN_TIMESTEP_S - 1e-12:
             return result
         # A stiff linkage can blow up at the default step: walk it again at half the step.
         settings = dataclasses.replace(settings, timestep=finer)
-
-
-@contextlib.contextmanager
-def _quiet_engine() -> Iterator[None]:
-    """Keeps MuJoCo's warnings out of `MUJOCO_LOG.TXT` in the user's working directory.
-
-    A walk reads the engine's warnings off `MjData.warning` (see `_Run._tick`) instead.
-    """
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(lambda _message: None)
-    try:
-        yield
-    finally:
-        mujoco.set_mju_user_warning(previous)
-
-
-@dataclass
-class _Records:
-    """A walk's per-tick records, preallocated for its T ticks (S of them sampling loads).
-
-    Attributes:
-        t: (T,) time; body: (T, 3) frame position; mat: (T, 9) frame orientation;
-        phase: (T, 6) crank phases; qpos: (T, nq) the state; torque: (T, 6) motor torques;
-        limited: (T, 6) each drive at its supply's limit; feet: (T, 6, 3) foot sites; frame:
-        (T,) the frame
-        touches the floor; contact: (T, 6) each leg touches it; loads: (S, width) the
-        model's load samples (`sim.robot_model.LegLoads`).
-    """
-
-    t: np.ndarray
-    body: np.ndarray
-    mat: np.ndarray
-    phase: np.ndarray
-    qpos: np.ndarray
-    torque: np.ndarray
-    limited: np.ndarray
-    feet: np.ndarray
-    frame: np.ndarray
-    contact: np.ndarray
-    loads: np.ndarray
-
-    def head(self, ticks: int, every: int) -> _Records:
-        """Returns the first `ticks` ticks' records (and their load samples, one every
-        `every` ticks)."""
-        rows = {f.name: getattr(self, f.name)[:ticks] for f in dataclasses.fields(self)}
-        return _Records(**{**rows, "loads": self.loads[: -(-ticks // every)]})
-
-    @classmethod
-    def empty(cls, ticks: int, samples: int, nq: int, width: int) -> _Records:
-        return cls(
-            t=np.empty(ticks),
-            body=np.empty((ticks, 3)),
-            mat=np.empty((ticks, 9)),
-            phase=np.empty((ticks, 6)),
-            qpos=np.empty((ticks, nq)),
-            torque=np.empty((ticks, 6)),
-            limited=np.zeros((ticks, 6), dtype=bool),
-            feet=np.empty((ticks, 6, 3)),
-            frame=np.zeros(ticks, dtype=bool),
-            contact=np.zeros((ticks, 6), dtype=bool),
-            loads=np.empty((samples, width)),
-        )
-
-
-class _Watch:
-    """A walk's break rules followed as it goes (`sim.walk_figures.BreakWatch`), with the
-    pin forces of the samples so far (computed once, kept for the walk's figures)."""
-
-    def __init__(self, ticks: int, samples: int) -> None:
-        self.samples = samples
-        self.rules = BreakWatch(ticks, 0)
-        self._ticks = 0
-        self._samples = 0
-        self._pins: list[np.ndarray] = []
-
-    def follow(self, rec: _Records, ticks: int, samples: int, pid: PhasePid, run: _Run) -> None:
-        """Takes the records up to `ticks` ticks and `samples` load samples."""
-        new = slice(self._ticks, ticks)
-        pins = run.robot.loads.pin_forces(rec.loads[self._samples : samples])
-        if self._samples == 0 and samples:
-            self.rules.pins_total = len(pins) // samples * self.samples
-        lag = run.lag_deg(pid, rec.t[new], rec.phase[new])
-        self.rules.add(rec.frame[new], rec.limited[new], lag, pins)
-        self._pins.append(pins)
-        self._ticks, self._samples = ticks, samples
-
-    def pins(self) -> np.ndarray:
-        """Every pin force over the samples followed (flat)."""
-        return np.concatenate(self._pins) if self._pins else np.zeros(0)
 
 
 class _Run:
@@ -332,8 +243,8 @@ class _Run:
         n_ticks = round(self.settings.seconds * self.gait.rate_hz)
         every = self.settings.loads_every
         samples = -(-n_ticks // every)
-        rec = _Records.empty(n_ticks, samples, m.nq, robot.loads.width)
-        watch = _Watch(n_ticks, samples) if self.settings.stop_at_break else None
+        rec = WalkRecords.empty(n_ticks, samples, m.nq, robot.loads.width)
+        watch = WalkWatch(n_ticks, samples) if self.settings.stop_at_break else None
         for tick in range(n_ticks):
             if not self._tick(pid):
                 return self._diverged()
@@ -342,7 +253,8 @@ class _Run:
                 robot.loads.sample(m, d, rec.loads[tick // every])
             done = tick + 1
             if watch and (done % BREAK_CHECK_TICKS == 0 or done == n_ticks):
-                watch.follow(rec, done, -(-done // every), pid, self)
+                lag = functools.partial(self.lag_deg, pid)
+                watch.follow(rec, done, -(-done // every), robot.loads.pin_forces, lag)
                 if watch.rules.broken() and done < n_ticks:
                     return self._result(rec.head(done, every), pid, p0, yaw0, watch.pins())
         return self._result(rec, pid, p0, yaw0, watch.pins() if watch else None)
@@ -361,7 +273,7 @@ class _Run:
         blown = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
         return not blown and bool(np.isfinite(d.qpos).all()) and abs(d.qpos[2]) < 10.0
 
-    def _record(self, rec: _Records, tick: int) -> None:
+    def _record(self, rec: WalkRecords, tick: int) -> None:
         """Keeps what the tick left: the state, the motors' torques and whether their
         drives are at the supply's limit, contacts (what needs the whole walk is computed
         from these at its end, `_result`)."""
@@ -387,7 +299,7 @@ class _Run:
 
     def _result(
         self,
-        rec: _Records,
+        rec: WalkRecords,
         pid: PhasePid,
         p0: np.ndarray,
         yaw0: float,

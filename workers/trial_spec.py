@@ -60,7 +60,7 @@ class TrialSpec:
             iteration (so at least one runs).
         options: approach-specific settings passed to `algorithms.make_optimizer`.
         walk_rerank: walk this many of the final lowest-loss linkages that pass the physical
-            checks on the simulated robot (`rerank_by_walking`); 0: none.
+            checks on the simulated robot (`workers.trial_walks.rerank_by_walking`); 0: none.
         walks: the budget of a walking trial (fitness "Fw"): candidates walked on the
             physics (`sim.walk_fitness`); the trial ends once it has walked this many, or
             after `evaluations` candidates, a guard (`CANDIDATES_PER_WALK` per walk when

@@ -57,7 +57,7 @@ class WalkSurrogate:
         self.fits = 0
 
     def refresh(self, log) -> None:
-        """Fits the model on the walk log (`workers.walk_evaluator.WalkLog`) when it has
+        """Fits the model on the walk log (`workers.walk_log.WalkLog`) when it has
         reached the next fixed point (`START`, then every `REFIT_EVERY` walks)."""
         walks = log.counts["walks"]
         due = 0 if walks < START else 1 + (walks - START) // REFIT_EVERY

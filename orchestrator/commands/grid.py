@@ -145,7 +145,7 @@ def _ui_flag(uri: str) -> list[str]:
 
 def describe(grid: Grid, cluster: Cluster) -> str:
     """Returns the dry-run text: resolved config, grid id, reservation and every trial."""
-    from linkevo.orchestrator.config import to_toml
+    from linkevo.orchestrator.config_text import to_toml
     from linkevo.orchestrator.reservation import Reservation
 
     cfg = grid.config

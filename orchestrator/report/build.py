@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from linkevo.orchestrator.config import ConfigError, from_dict, to_toml
+from linkevo.orchestrator.config import ConfigError, from_dict
+from linkevo.orchestrator.config_text import to_toml
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
 from linkevo.orchestrator.report.findings import best_path_sizes, check_findings

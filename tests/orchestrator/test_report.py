@@ -207,7 +207,7 @@ def test_each_figure_has_its_panels_and_labels(loaded):
     assert titled == ["MAP-WH, F_p", "MAP-ST, F_p", "EA, F_p", "NSGA-II, F_p"]
     assert paths.axes[-1].get_ylabel() == fig.LOSS_LABEL  # the one shared colour bar
     ea = next(ax for ax in paths.axes if ax.get_title().startswith("EA"))
-    assert len(ea.collections[0].get_segments()) == fig.STRIP_PATHS
+    assert len(ea.collections[0].get_segments()) >= fig.STRIP_PATHS  # failed angles: gaps
     assert len(ea.texts) == fig.STRIP_PATHS
 
     conv = fig.convergence_figure(loaded).figure

@@ -84,7 +84,7 @@ measured on, its held-out figures."""
 WALK_MODEL_PNG = "walk_model.png"
 WALK_LOG = "walks.parquet"
 """A walking trial's walk log: a row per candidate it built (its stage, leg key, node,
-seconds and each floor's figures; `workers.walk_evaluator.WalkLog`)."""
+seconds and each floor's figures; `workers.walk_log.WalkLog`)."""
 WALK_RERANK = "walk_rerank.parquet"
 """A trial's re-ranking walks (grid key `walk_rerank`): its K best linkages walked."""
 BEST_WALKER = "best_walker.json"
