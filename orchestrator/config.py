@@ -293,23 +293,14 @@ def _validate(cfg: GridConfig) -> None:
         raise _fail("walks", cfg.walks, 'allowed: 0 unless fitnesses holds "Fw"')
     if not isinstance(cfg.seed_from, str):
         raise _fail("seed_from", cfg.seed_from, "allowed: a run id (a string)")
-    if cfg.seed_from:
-        others = [a for a in cfg.approaches if not is_map_elites(a)]
-        if cfg.fitnesses != (WALKING_FITNESS,) or others:
-            raise _fail(
-                "seed_from",
-                cfg.seed_from,
-                'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
-                f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
-            )
     if not isinstance(cfg.surrogate, bool):
         raise _fail("surrogate", cfg.surrogate, "allowed: true or false")
-    if cfg.surrogate:
-        others = [a for a in cfg.approaches if not is_map_elites(a)]
-        if cfg.fitnesses != (WALKING_FITNESS,) or others:
+    not_maps = [a for a in cfg.approaches if not is_map_elites(a)]
+    for key in ("seed_from", "surrogate"):  # walking MAP-Elites trials only
+        if getattr(cfg, key) and (cfg.fitnesses != (WALKING_FITNESS,) or not_maps):
             raise _fail(
-                "surrogate",
-                cfg.surrogate,
+                key,
+                getattr(cfg, key),
                 'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
                 f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
             )

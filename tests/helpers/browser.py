@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -37,3 +38,26 @@ def chromium(profile: Path | None = None, size: str = "1400,1000") -> Iterator[o
         yield driver
     finally:
         driver.quit()
+
+
+def open_explorer(browser, path: Path) -> None:
+    """Opens an explorer page from disk and waits until it has inflated its data."""
+    browser.get(path.resolve().as_uri())
+    deadline = time.monotonic() + 20
+    while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
+        assert time.monotonic() < deadline, "the explorer page did not load its data"
+        time.sleep(0.05)
+
+
+def point_at(browser, cell: int, click: bool = False) -> None:
+    """Moves the real mouse over an explorer map's cell (and clicks it)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.by import By
+
+    where = browser.execute_script("return window.explorer.cellCenter(arguments[0])", cell)
+    canvas = browser.find_element(By.ID, "map")
+    size = canvas.size  # selenium's offsets count from the element's centre
+    chain = ActionChains(browser).move_to_element_with_offset(
+        canvas, round(where["x"] - size["width"] / 2), round(where["y"] - size["height"] / 2)
+    )
+    (chain.click() if click else chain).perform()

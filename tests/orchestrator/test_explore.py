@@ -22,7 +22,7 @@ from linkevo.sim.physical import physical_checks
 from linkevo.workers.store.runs import RunStore, TrialRun
 from linkevo.workers.store.tracking import ensure_experiment
 from linkevo.workers.trial_spec import TrialSpec
-from tests.helpers.browser import chromium
+from tests.helpers.browser import chromium, open_explorer, point_at
 from tests.helpers.trials import record_trials
 
 GRID = "e0e0e0e0e0e0"
@@ -148,28 +148,6 @@ def browser():
         yield driver
 
 
-def _open(browser, path: Path) -> None:
-    browser.get(path.resolve().as_uri())
-    deadline = time.monotonic() + 20
-    while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
-        assert time.monotonic() < deadline, "the explorer page did not load its data"
-        time.sleep(0.05)
-
-
-def _point_at(browser, cell: int, click: bool = False) -> None:
-    """Moves the real mouse over a map cell (and clicks it)."""
-    from selenium.webdriver.common.action_chains import ActionChains
-    from selenium.webdriver.common.by import By
-
-    where = browser.execute_script("return window.explorer.cellCenter(arguments[0])", cell)
-    canvas = browser.find_element(By.ID, "map")
-    size = canvas.size  # selenium's offsets count from the element's centre
-    chain = ActionChains(browser).move_to_element_with_offset(
-        canvas, round(where["x"] - size["width"] / 2), round(where["y"] - size["height"] / 2)
-    )
-    (chain.click() if click else chain).perform()
-
-
 def _text(browser, element_id: str) -> str:
     from selenium.webdriver.common.by import By
 
@@ -185,19 +163,19 @@ def test_page_in_chromium_hover_click_pin_filter_and_fold(store, tmp_path, brows
     assert main(["explore", runs["MAP-ST"], "--tracking-uri", uri, "--out", str(out),
                  "--no-log"]) == 0  # fmt: skip
     view = _page_views(out)[0]
-    _open(browser, out)
+    open_explorer(browser, out)
     worst, best = view["cells"][-1], view["cells"][0]
-    _point_at(browser, worst["c"])
+    point_at(browser, worst["c"])
     hovered = _text(browser, "hover-info")
     assert f"cell {worst['c']}: loss {worst['l']:.4f}" in hovered
-    _point_at(browser, best["c"], click=True)
+    point_at(browser, best["c"], click=True)
     selected = _text(browser, "selected-info")
     assert f"cell {best['c']}: loss {best['l']:.4f}" in selected
     assert _text(browser, "pull-command") == f"linkevo pull {runs['MAP-ST']}:{best['c']}"
     sheet = browser.find_elements(By.CSS_SELECTOR, "#selected-info table tr")
     assert len(sheet) == 1 + len(best["g"]["m"])  # a row per beam
     browser.find_element(By.ID, "pin").click()
-    _point_at(browser, worst["c"], click=True)
+    point_at(browser, worst["c"], click=True)
     browser.find_element(By.ID, "pin").click()
     pinned = _text(browser, "pins")
     assert f"linkevo pull {runs['MAP-ST']}:{best['c']}" in pinned
@@ -228,7 +206,7 @@ def test_page_in_chromium_hover_click_pin_filter_and_fold(store, tmp_path, brows
         "moving_share",
     ]
     assert browser.execute_script(where, moved["c"]) != before
-    _point_at(browser, moved["c"])  # the folded map still finds each cell
+    point_at(browser, moved["c"])  # the folded map still finds each cell
     assert f"cell {moved['c']}: loss {moved['l']:.4f}" in _text(browser, "hover-info")
 
 
@@ -240,7 +218,7 @@ def test_grid_page_in_chromium_picks_a_trial(store, tmp_path, browser):
     out = tmp_path / "grid.html"
     assert main(["explore", GRID, "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
     views = _page_views(out)
-    _open(browser, out)
+    open_explorer(browser, out)
     picker = Select(browser.find_element(By.ID, "trial"))
     assert [o.text.split(" ")[0] for o in picker.options] == ["MAP-LIS/Fp/00", "MAP-ST/Fp/00"]
     lowest = [min(c["l"] for c in v["cells"] if c["l"] is not None) for v in views]
@@ -253,7 +231,7 @@ def test_grid_page_in_chromium_picks_a_trial(store, tmp_path, browser):
     picker.select_by_index(other)
     _wait_for(browser, "summary", runs[views[other]["approach"]])
     cell = views[other]["cells"][0]
-    _point_at(browser, cell["c"], click=True)
+    point_at(browser, cell["c"], click=True)
     said = _text(browser, "selected-info")
     assert f"{views[other]['trial_key']}, cell {cell['c']}: loss {cell['l']:.4f}" in said
 
@@ -292,7 +270,7 @@ def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, ml
             assert time.monotonic() < deadline, "the page did not run inside the MLflow UI"
             time.sleep(0.1)
         browser.execute_script("document.getElementById('map').scrollIntoView()")
-        _point_at(browser, cell["c"], click=True)
+        point_at(browser, cell["c"], click=True)
         assert _text(browser, "pull-command") == f"linkevo pull {run_id}:{cell['c']}"
     finally:
         browser.switch_to.default_content()

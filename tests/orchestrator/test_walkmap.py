@@ -17,7 +17,7 @@ from linkevo.orchestrator.walkmap import Selection, run_in_process, walk_map
 from linkevo.sim.walk_map import build_cells
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial_spec import TrialSpec
-from tests.helpers.browser import chromium
+from tests.helpers.browser import chromium, open_explorer, point_at
 from tests.helpers.trials import record_trials
 
 GRID = "0a0b0c0d0e0f"
@@ -140,7 +140,6 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
 
 
 def test_the_explorer_colours_by_distance_and_filters_on_walking(store, lis_map, tmp_path):
-    from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select
 
@@ -155,23 +154,14 @@ def test_the_explorer_colours_by_distance_and_filters_on_walking(store, lis_map,
     cell = int(walked.sort_values("mean_distance_cm").iloc[-1]["cell"])
     distance = float(walked.set_index("cell").loc[cell, "mean_distance_cm"])
     with chromium() as browser:
-        browser.get(out.resolve().as_uri())
-        deadline = time.monotonic() + 20
-        while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
-            assert time.monotonic() < deadline, "the explorer page did not load its data"
-            time.sleep(0.05)
+        open_explorer(browser, out)
         assert browser.find_element(By.ID, "walking").is_displayed()
         colour = Select(browser.find_element(By.ID, "colour-by"))
         assert [o.text for o in colour.options] == ["loss", "distance, flat", "distance, carpet"]
         colour.select_by_visible_text("distance, flat")
         assert "distance on flat" in browser.find_element(By.ID, "legend").text
 
-        where = browser.execute_script("return window.explorer.cellCenter(arguments[0])", cell)
-        canvas = browser.find_element(By.ID, "map")
-        size = canvas.size
-        ActionChains(browser).move_to_element_with_offset(
-            canvas, round(where["x"] - size["width"] / 2), round(where["y"] - size["height"] / 2)
-        ).perform()
+        point_at(browser, cell)
         hovered = browser.find_element(By.ID, "hover-info").text
         assert f"cell {cell}:" in hovered
         assert f"flat: {distance:.1f} cm" in hovered
@@ -404,9 +394,14 @@ def test_a_walking_grid_starts_from_a_walked_repertoire(store, lis_map, tmp_path
     assert client.get_run(run_id).data.metrics["walks_reused"] == len(seeded_cells)
     history = client.get_metric_history(run_id, "walks")
     assert min(m.value for m in history) == 0  # the seeded batch walked nothing
-    for seed_from, message in ((runs["EA"], "a MAP-Elites trial with a walk map"),
-                               (runs["MAP-WH"], "without walkmap.parquet")):  # fmt: skip
+    # A MAP-Elites trial without a walk map: in a store of its own, since the tests before
+    # this one may have walked every map of the module's store.
+    bare_uri, bare = record_trials(tmp_path / "bare", GRID, [TrialSpec("MAP-ST", "Fp", 1000, 500)])
+    for seed_from, message, where in (
+        (runs["EA"], "a MAP-Elites trial with a walk map", uri),
+        (bare["MAP-ST"], "without walkmap.parquet", bare_uri),
+    ):
         again = tiny_grid(tmp_path, approaches=["MAP-LIS"], fitnesses=["Fw"], trials=1,
-                          walks=6, seed_from=seed_from, tracking_uri=uri)  # fmt: skip
+                          walks=6, seed_from=seed_from, tracking_uri=where)  # fmt: skip
         with pytest.raises(ConfigError, match=message):
             launch(again, progress=False)

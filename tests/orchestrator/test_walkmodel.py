@@ -8,7 +8,6 @@ from __future__ import annotations
 import contextlib
 import io
 import json
-import time
 from pathlib import Path
 
 import pandas as pd
@@ -20,7 +19,7 @@ from linkevo.algorithms.walk_model import WalkModel
 from linkevo.orchestrator.cli import main
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial_spec import TrialSpec
-from tests.helpers.browser import chromium
+from tests.helpers.browser import chromium, open_explorer, point_at
 from tests.helpers.trials import record_trials
 
 GRID = "0a0b0c0d0e1f"
@@ -94,7 +93,6 @@ def test_predict_gives_every_filled_cell_a_row_per_floor(store, fitted, tmp_path
 
 
 def test_the_explorer_and_pull_mark_predicted_walks_as_predicted(store, fitted, tmp_path, capsys):
-    from selenium.webdriver.common.action_chains import ActionChains
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import Select
 
@@ -108,23 +106,14 @@ def test_the_explorer_and_pull_mark_predicted_walks_as_predicted(store, fitted, 
     out = tmp_path / "page.html"
     assert main(["explore", run_id, "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
     with chromium() as browser:
-        browser.get(out.resolve().as_uri())
-        deadline = time.monotonic() + 20
-        while not browser.execute_script("return !!(window.explorer && window.explorer.ready)"):
-            assert time.monotonic() < deadline, "the explorer page did not load its data"
-            time.sleep(0.05)
+        open_explorer(browser, out)
         colour = Select(browser.find_element(By.ID, "colour-by"))
         assert [o.text for o in colour.options] == ["loss", "distance, flat", "distance, carpet"]
         colour.select_by_visible_text("distance, flat")
         legend = browser.find_element(By.ID, "legend").text
         assert f"predicted by the walk model {fitted['run_id']}, not walked" in legend
         assert browser.execute_script("return window.explorer.predictedOnMap(arguments[0])", cell)
-        where = browser.execute_script("return window.explorer.cellCenter(arguments[0])", cell)
-        canvas = browser.find_element(By.ID, "map")
-        size = canvas.size
-        ActionChains(browser).move_to_element_with_offset(
-            canvas, round(where["x"] - size["width"] / 2), round(where["y"] - size["height"] / 2)
-        ).perform()
+        point_at(browser, cell)
         hovered = browser.find_element(By.ID, "hover-info").text
         assert f"cell {cell}:" in hovered
         shown = f"flat: {guess['predicted_cm']:.1f} ± {guess['spread_cm']:.1f} cm (predicted)"

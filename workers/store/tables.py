@@ -136,6 +136,21 @@ def read_repertoire(path: Path, run_id: str, name: str) -> pd.DataFrame:
     return table
 
 
+def _check_cell_floor_rows(frame: pd.DataFrame, columns, fail) -> None:
+    """Raises `fail(problem)` unless a table of a row per cell and floor has `columns`,
+    integer cells, known floors and no (cell, floor) pair twice."""
+    missing = [c for c in columns if c not in frame.columns]
+    if missing:
+        raise fail(f"lacks the column(s) {', '.join(missing)}")
+    if frame["cell"].to_numpy().dtype.kind != "i":
+        raise fail("has cells that are not integers")
+    unknown = sorted(set(frame["floor"]) - set(FLOORS))
+    if unknown:
+        raise fail(f"has unknown floors: {', '.join(map(repr, unknown))}")
+    if frame.duplicated(["cell", "floor"]).any():
+        raise fail("holds a cell and floor twice")
+
+
 def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
     """Returns a run's walk map read from `path`, checked by content, with `breaks` as
     bool.
@@ -158,16 +173,10 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
     def fail(problem: str) -> ArtefactError:
         return ArtefactError(WALK_MAP, run_id, problem, remedy)
 
-    missing = [c for c in WALK_MAP_COLUMNS if c not in frame.columns]
-    if missing:
-        raise fail(f"lacks the column(s) {', '.join(missing)}")
-    if frame["cell"].to_numpy().dtype.kind != "i":
-        raise fail("has cells that are not integers")
-    unknown = sorted(set(frame["floor"]) - set(FLOORS)) + sorted(set(frame["status"]) - STATUSES)
+    _check_cell_floor_rows(frame, WALK_MAP_COLUMNS, fail)
+    unknown = sorted(set(frame["status"]) - STATUSES)
     if unknown:
-        raise fail(f"has unknown floors or statuses: {', '.join(map(repr, unknown))}")
-    if frame.duplicated(["cell", "floor"]).any():
-        raise fail("holds a cell and floor twice")
+        raise fail(f"has unknown statuses: {', '.join(map(repr, unknown))}")
     breaks = frame["breaks"]
     if not breaks.map(lambda v: isinstance(v, bool | np.bool_)).all():
         raise fail("has a breaks column that is not true or false")
@@ -201,15 +210,7 @@ def read_walk_prediction(path: Path, run_id: str) -> pd.DataFrame:
     def fail(problem: str) -> ArtefactError:
         return ArtefactError(WALK_PREDICTION, run_id, problem, remedy)
 
-    missing = [c for c in PREDICTION_COLUMNS if c not in frame.columns]
-    if missing:
-        raise fail(f"lacks the column(s) {', '.join(missing)}")
-    if frame["cell"].to_numpy().dtype.kind != "i":
-        raise fail("has cells that are not integers")
-    if sorted(set(frame["floor"]) - set(FLOORS)):
-        raise fail("has unknown floors")
-    if frame.duplicated(["cell", "floor"]).any():
-        raise fail("holds a cell and floor twice")
+    _check_cell_floor_rows(frame, PREDICTION_COLUMNS, fail)
     figures = frame[["predicted_cm", "spread_cm", "p_break"]]
     if any(figures[c].to_numpy().dtype.kind != "f" for c in figures):
         raise fail("has figures that are not numbers")
