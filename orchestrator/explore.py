@@ -77,9 +77,10 @@ def repertoire_view(
         height in modules), g (the drawing, or None): n (nodes at the first assembled
         angle, (12, 2)), t (node kinds, (12,)), m (beams: start, end, kind, length, modules
         rounded on their own), f (foot path x and y, (2, A), None at failed angles), and
-        with a walk map w: per floor of `floors`, [distance cm, breaks 0/1, reason] or None
-        where the cell was not walked on it; with predicted walks p: per floor,
-        [predicted cm, spread cm, probability of breaking] or None. Positions are rounded
+        with a walk map w: per floor of `floors`, [distance cm, breaks 0/1, reason, beyond
+        the level-body no-slip bound 0/1] or None where the cell was not walked on it;
+        with predicted walks p: per floor, [predicted cm, spread cm, probability of
+        breaking] or None. Positions are rounded
         to 0.1 module, lengths to 0.01, descriptors to 0.001, distances to 0.1 cm.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
@@ -167,19 +168,22 @@ def repertoire_view(
 
 def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str], list]]:
     """Returns the floors of a walk map (flat first) and, per (cell, floor) walked, the
-    page's [distance cm, breaks 0/1, reason]."""
+    page's [distance cm, breaks 0/1, reason, beyond the level-body bound 0/1]."""
     if walks is None or walks.empty:
         return [], {}
     walks = walks[walks["status"] == "walked"]
     floors = in_floor_order(walks["floor"].unique())
+    bound = walks["bound_cm"].to_numpy(dtype=float)
+    beyond = np.isfinite(bound) & (walks["mean_distance_cm"].to_numpy(dtype=float) > bound)
     walked = {
-        (int(cell), str(floor)): [round(float(d), 1), int(bool(b)), str(r)]
-        for cell, floor, d, b, r in zip(
+        (int(cell), str(floor)): [round(float(d), 1), int(bool(b)), str(r), int(x)]
+        for cell, floor, d, b, r, x in zip(
             walks["cell"],
             walks["floor"],
             walks["mean_distance_cm"],
             walks["breaks"],
             walks["reason"],
+            beyond,
             strict=True,
         )
     }

@@ -234,6 +234,7 @@ def simulated_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
             "seconds": float(getattr(r, "seconds", 10.0)),
             "breaks": bool(r.breaks),
             "reason": str(r.reason),
+            "beyond_bound": bool(float(r.mean_distance_cm) > float(r.bound_cm)),
         }
         for r in rows.itertuples()
     }
@@ -256,7 +257,7 @@ def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataF
                 {"floor": floor, **{c.removeprefix(f"{floor}_"): log[c].iloc[i] for c in own}}
             )
     return pd.DataFrame(rows, columns=["floor", "status", "mean_distance_cm", "breaks",
-                                       "reason", "seconds"])  # fmt: skip
+                                       "reason", "seconds", "bound_cm"])  # fmt: skip
 
 
 def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
@@ -303,6 +304,7 @@ def walk_line(walks: dict[str, dict]) -> str:
     return (
         "; ".join(
             f"{floor} {w['distance_cm']:.1f} cm in {w['seconds']:g} s"
+            + (" (beyond the level-body bound: trust it less)" if w.get("beyond_bound") else "")
             + (f", breaks ({w['reason']})" if w["breaks"] else "")
             for floor, w in walks.items()
         )

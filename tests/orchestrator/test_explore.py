@@ -274,3 +274,20 @@ def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, ml
         assert _text(browser, "pull-command") == f"linkevo pull {run_id}:{cell['c']}"
     finally:
         browser.switch_to.default_content()
+
+
+def test_a_walk_beyond_the_level_body_bound_is_flagged_in_the_view(store, tmp_path):
+    from linkevo.sim.walk_map import walk_map_frame
+
+    uri, runs = store
+    table = RunStore(uri).repertoire(runs["MAP-LIS"], tmp_path)
+    cells = table["cell"].to_numpy()[:2]
+    rows = [{"cell": int(c), "floor": "flat", "status": "walked", "mean_distance_cm": d,
+             "breaks": False, "reason": "", "leg": "LEGO build", "bound_cm": 100.0,
+             "torque_p95_of_stall": 0.3, "pin_force_p99_n": 10.0, "seconds": 10.0}
+            for c, d in zip(cells, (80.0, 130.0), strict=True)]  # fmt: skip
+    trial = TrialRun(runs["MAP-LIS"], "MAP-LIS/Fp/00", "MAP-LIS", "Fp", "paper", 40)
+    view = repertoire_view(table, trial, 0, walk_map_frame(rows))
+    walks = {c["c"]: c["w"][0] for c in view["cells"] if c["c"] in set(cells.tolist())}
+    assert walks[int(cells[0])] == [80.0, 0, "", 0]
+    assert walks[int(cells[1])] == [130.0, 0, "", 1]  # 130 cm against a 100-cm bound
