@@ -126,11 +126,14 @@ def predict_handler(args: argparse.Namespace) -> int:
         lines = [f"{trial.trial_key} (run {trial.run_id}): walkpred.parquet, {cells} cells "
                  f"predicted by walk model {model_run}"]  # fmt: skip
         for floor, part in frame.groupby("floor", sort=False):
-            best = part.sort_values("predicted_cm", ascending=False).iloc[0]
-            sound = int((part["p_break"] < 0.5).sum())
+            sound = part[part["p_break"] < 0.5]
+            furthest = "none"
+            if len(sound):
+                best = sound.sort_values("predicted_cm", ascending=False).iloc[0]
+                furthest = f"cell {int(best['cell'])}, {best['predicted_cm']:.1f} cm"
             lines.append(
-                f"  {floor}: {sound} predicted not to break; furthest predicted: cell "
-                f"{int(best['cell'])}, {best['predicted_cm']:.1f} cm (predicted)"
+                f"  {floor}: {len(sound)} predicted not to break; furthest of them "
+                f"(predicted): {furthest}"
             )
         print("\n".join(lines))
     return 0
