@@ -106,6 +106,8 @@ def test_walkmap_walks_the_chosen_cells_on_both_floors_and_logs_the_map(store, l
             history = client.get_metric_history(run_id, f"walk_best_cm_{floor}")
             assert history[0].value == pytest.approx(sound["mean_distance_cm"].max())
             assert f"  {floor}: " in printed
+            beyond = int((sound["mean_distance_cm"] > sound["bound_cm"]).sum())
+            assert f"{len(sound)} walk ({beyond} beyond the level-body bound)" in printed
 
 
 def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(

@@ -50,7 +50,10 @@ def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> 
         broken[rows[~ok], cols[~ok]] = 1.0
         shown = ax.imshow(distance, origin="lower", cmap=DISTANCE_CMAP, vmin=low, vmax=high)
         ax.imshow(broken, origin="lower", cmap=BROKEN, vmin=0.0, vmax=1.0)
-        ax.set_title(f"{floor}: {int(ok.sum())} walk, {int((~ok).sum())} break (red)", fontsize=8)
+        beyond = int((part["mean_distance_cm"].to_numpy(dtype=float)[ok]
+                      > part["bound_cm"].to_numpy(dtype=float)[ok]).sum())  # fmt: skip
+        ax.set_title(f"{floor}: {int(ok.sum())} walk ({beyond} beyond the level-body bound), "
+                     f"{int((~ok).sum())} break (red)", fontsize=8)  # fmt: skip
         x_axis, y_axis = axis_names(space)
         ax.set_xlabel(f"{x_axis} (bin)", fontsize=6)
         ax.set_ylabel(f"{y_axis} (bin)", fontsize=6)
