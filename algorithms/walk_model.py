@@ -51,9 +51,6 @@ class WalkData:
     def __len__(self) -> int:
         return len(self.features)
 
-    def take(self, rows: np.ndarray) -> WalkData:
-        return WalkData(self.features[rows], self.distance[rows], self.breaks[rows])
-
 
 @dataclass(frozen=True)
 class Prediction:

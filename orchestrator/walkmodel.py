@@ -37,11 +37,10 @@ class WalkModelError(LinkevoError, ValueError):
 
 @dataclass(frozen=True)
 class WalkedRepertoire:
-    """One repertoire's walked cells: its trial, cells (N,), genomes (N, 56) and walks."""
+    """One repertoire's walked cells: its trial, cells (N,) and their walks."""
 
     trial: TrialRun
     cells: np.ndarray
-    genomes: np.ndarray
     data: WalkData
 
 
@@ -74,9 +73,7 @@ def walked_repertoires(store: RunStore, refs: list[str]) -> list[WalkedRepertoir
                 genomes = np.stack(table["genome"].to_numpy()).astype(np.float64)
                 distance, breaks = walk_targets(walks, cells)
                 features = walk_features(genomes, trial.mode)
-                out.append(
-                    WalkedRepertoire(trial, cells, genomes, WalkData(features, distance, breaks))
-                )
+                out.append(WalkedRepertoire(trial, cells, WalkData(features, distance, breaks)))
     if not out:
         raise WalkModelError(
             f"no walked cell in {', '.join(refs)}: make walk maps first (linkevo walkmap REF)"
