@@ -14,14 +14,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
+from matplotlib import rc_context
 
 from linkevo.orchestrator.config import ConfigError, from_dict
 from linkevo.orchestrator.config_text import to_toml
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
-from linkevo.orchestrator.report.findings import best_path_sizes, check_findings
+from linkevo.orchestrator.report.findings import MEASURES, best_path_sizes, check_findings
 from linkevo.orchestrator.report.html import render_html
 from linkevo.orchestrator.report.load import GridData, load_grid
+from linkevo.orchestrator.report.measures import trial_measures
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
 from linkevo.orchestrator.report.verdicts import Finding
 from linkevo.workers.store.artifacts import write_bytes_atomic
@@ -52,6 +54,7 @@ TRIAL_COLUMNS: tuple[str, ...] = (
     "common_qd_score",
     "path_diversity",
     "final_evaluations",
+    *MEASURES,
 )
 
 
@@ -97,9 +100,10 @@ def _render(figure, fmt: str) -> bytes:
 
 def report_figures(grid: GridData) -> list[fig.ReportFigure]:
     """Returns every figure the grid supports, in report order."""
-    made = [fig.best_loss_figure(grid), fig.repertoire_maps_figure(grid)]
-    made += [fig.path_maps_figure(grid, fitness) for fitness in grid.fitnesses()]
-    made.append(fig.convergence_figure(grid))
+    with rc_context(fig.REPORT_RC):
+        made = [fig.best_loss_figure(grid), fig.repertoire_maps_figure(grid)]
+        made += [fig.path_maps_figure(grid, fitness) for fitness in grid.fitnesses()]
+        made.append(fig.convergence_figure(grid))
     return [f for f in made if f is not None]
 
 
@@ -129,13 +133,18 @@ def build_report(
         out = Path(out_dir) if out_dir is not None else Path("reports") / name
         summary = summary_table(grid.trials)
         tests = pairwise_tests(grid.trials)
-        findings = tuple(check_findings(grid, tests))
-        checks = best_linkage_checks(grid)
+        measured = trial_measures(grid)[["trial_key", *MEASURES]]
+        trials = grid.trials.merge(measured, on="trial_key", how="left")
         sizes = best_path_sizes(grid)
+        budget = grid.config.get("evaluations")
+        findings = tuple(check_findings(trials, sizes, tests, budget))
+        checks = best_linkage_checks(grid)
         made = report_figures(grid)
     with _staged(out) as staging:
         tables = {"best_linkage_checks.csv": checks, "path_sizes.csv": sizes}
-        written = _write_report(grid, tracking_uri, summary, tests, findings, tables, made, staging)
+        written = _write_report(
+            grid, trials, tracking_uri, summary, tests, findings, tables, made, staging
+        )
     files = [out / path.name for path in written]
     html_path = out / "report.html"
     if log_to_mlflow:
@@ -186,7 +195,7 @@ def _staged(out: Path) -> Iterator[Path]:
 
 
 def _write_report(
-    grid, tracking_uri, summary, tests, findings, read_tables, made, out: Path
+    grid, trials, tracking_uri, summary, tests, findings, read_tables, made, out: Path
 ) -> list[Path]:
     """Writes the report's files into `out`; returns them (report.html last)."""
     files: list[Path] = []
@@ -200,7 +209,7 @@ def _write_report(
             write_bytes_atomic(path, data)
             files.append(path)
         embedded.append((item.title, item.caption, png))
-    trials = grid.trials.reindex(columns=list(TRIAL_COLUMNS))
+    trials = trials.reindex(columns=list(TRIAL_COLUMNS))
     tables = {
         "trials.csv": trials,
         "best_loss_summary.csv": summary,

@@ -8,9 +8,15 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.load import GridData
-from linkevo.orchestrator.report.measures import trial_measures
-from linkevo.orchestrator.report.stats import a12, a12_interval, mann_whitney, pairwise_tests
+from linkevo.orchestrator.report.load import GridData, finished_trials
+from linkevo.orchestrator.report.stats import (
+    a12,
+    a12_interval,
+    holm,
+    mann_whitney,
+    median_interval,
+    pairwise_tests,
+)
 from linkevo.orchestrator.report.verdicts import (
     NOT_REPRODUCED,
     NOT_TESTABLE,
@@ -18,6 +24,7 @@ from linkevo.orchestrator.report.verdicts import (
     RULE,
     STRENGTH,
     Finding,
+    above,
     describe,
     judge,
     pair_row,
@@ -26,13 +33,16 @@ from linkevo.orchestrator.report.verdicts import (
     weakest,
 )
 from linkevo.sim.study import (
+    APPROACHES,
     BASELINE,
+    FITNESSES,
     MULTI_OBJECTIVE,
     STUDY_EVALUATIONS,
     STUDY_FITNESSES,
     is_map_elites,
     is_pareto,
     label,
+    ordered,
 )
 from linkevo.workers.store.artifacts import read_document
 
@@ -61,24 +71,39 @@ def best_path_sizes(grid: GridData) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=columns)
 
 
-def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
-    """Returns the study's claims, each judged on this grid's finished trials by `RULE`.
+HIGH_CORRELATION = 0.7
+"""|rho| from which a correlation is called high (Hinkle, Wiersma and Jurs, "Applied
+Statistics for the Behavioral Sciences": 0.7-0.9 high, above 0.9 very high)."""
+MEASURES: tuple[str, ...] = ("stagnation", "descriptor_correlation", "front_size")
+"""The per-trial measures `trial_measures` adds; `trials.csv` of a report carries them."""
+
+
+def check_findings(
+    trials: pd.DataFrame, sizes: pd.DataFrame, tests: pd.DataFrame, budget: object
+) -> list[Finding]:
+    """Returns the study's claims, each judged on a grid's finished trials by `RULE`, as
+    the paper states it (its exceptions, "highly", "in theory").
 
     Args:
-        grid: the loaded grid.
+        trials: the grid's trials with the `MEASURES` columns (`trial_measures`), as a
+            report's `trials.csv` holds them.
+        sizes: `best_path_sizes` of the grid (a report's `path_sizes.csv`).
         tests: `stats.pairwise_tests` of the grid's best losses.
+        budget: the grid's evaluations per trial; below the study's, nothing is judged.
     """
-    approaches = grid.approaches()
+    approaches = ordered(trials.approach.unique(), APPROACHES)
+    fitnesses = ordered(trials.fitness.unique(), FITNESSES)
     maps = [a for a in approaches if is_map_elites(a)]
     nsga = next((a for a in approaches if is_pareto(a)), MULTI_OBJECTIVE[0])
     study = tests[tests.family == "study"]
     searches = [a for a in approaches if a != BASELINE]
-    measures = trial_measures(grid)
+    measures = finished_trials(trials)
     mine = measures[measures.approach != BASELINE]
     best = f"lower median best loss; {RULE}"
     findings = [
         versus(
             study,
+            "1",
             "With F_p, the MAP-Elites approaches beat the EA (Results).",
             best,
             "Fp",
@@ -86,15 +111,17 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         ),
         versus(
             study,
+            "2",
             "With F_p, the MAP-Elites approaches slightly beat NSGA-II (Results).",
             best,
             "Fp",
             [(m, nsga) for m in maps],
         ),
         _alike(study, "Fsl"),
-        _oversized(grid),
+        _oversized(sizes[sizes.approach != BASELINE], nsga),
         versus(
             study,
+            "5",
             "All the tested approaches except the standard EA find linkages whose path is "
             "similar to the desired one; the quality-diversity and multi-objective "
             "approaches were more efficient than the EA at it (Abstract, Conclusion).",
@@ -104,6 +131,7 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         ),
         versus(
             pairwise_tests(mine, "stagnation", higher_is_better=True),
+            "6",
             "With F_p, the EA converged to a local optimum (Discussion).",
             "a larger median share of the budget spent after the last improvement of the "
             f"best loss than every other approach; {RULE}",
@@ -115,10 +143,11 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
         _trade_off(measures, nsga),
     ]
     diversity = pairwise_tests(mine, "path_diversity", higher_is_better=True)
-    for approach, fitness in (("MAP-WH", "Fsl"), ("MAP-AU", "Fp")):
+    for number, approach, fitness in (("8", "MAP-WH", "Fsl"), ("9", "MAP-AU", "Fp")):
         findings.append(
             versus(
                 diversity,
+                number,
                 f"With {label(fitness)}, {approach} created the most diverse paths (Results).",
                 "a higher median path diversity (`sim.path_diversity`) than every other "
                 f"approach; {RULE}",
@@ -128,37 +157,26 @@ def check_findings(grid: GridData, tests: pd.DataFrame) -> list[Finding]:
                 what="median path diversity",
             )
         )
+    common = pairwise_tests(mine, "common_coverage", higher_is_better=True)
     coverage = pairwise_tests(mine, "coverage", higher_is_better=True)
-    for fitness in [f for f in grid.fitnesses() if f in STUDY_FITNESSES]:  # the paper's
-        findings.append(_filled_differently(coverage, maps, fitness))
+    for fitness in [f for f in fitnesses if f in STUDY_FITNESSES]:  # the paper's
+        findings.append(_filled_differently(common, maps, fitness))
         findings.append(
             versus(
                 coverage,
-                f"With {label(fitness)}, MAP-ST's structural dimensions were hard to fill "
-                "(Discussion).",
+                "11",
+                f"With {label(fitness)}, MAP-ST's structural dimensions were difficult to "
+                "define in a way that filled the entire map (Discussion).",
                 f"a lower median coverage of its own grid than every other map; {RULE}",
                 fitness,
                 [("MAP-ST", m) for m in maps if m != "MAP-ST"],
                 what="median coverage",
             )
         )
-        findings.append(
-            versus(
-                pairwise_tests(mine, "descriptor_correlation", higher_is_better=True),
-                f"With {label(fitness)}, MAP-WH's dimensions are correlated with the "
-                "fitness (Results, prototyping).",
-                "a higher median of the largest |Spearman rho| between a descriptor and "
-                f"the elites' loss than every other map; {RULE}",
-                fitness,
-                [("MAP-WH", m) for m in maps if m != "MAP-WH"],
-                lower=False,
-                what="median |rho|",
-            )
-        )
-    findings.append(_fsl_more_diverse(mine))
+        findings.append(_highly_correlated(mine, fitness))
+    findings.append(_fsl_more_diverse(mine, searches))
     if BASELINE in approaches:
-        findings += _against_random(grid, tests, measures, searches)
-    budget = grid.config.get("evaluations")
+        findings += _against_random(measures, tests, fitnesses, searches)
     if isinstance(budget, int) and budget < STUDY_EVALUATIONS:
         judged = (
             f"not judged: a pipeline check ({budget:,} of the study's "
@@ -175,7 +193,7 @@ def _alike(study: pd.DataFrame, fitness: str) -> Finding:
     rows = study[study.fitness == fitness]
     if rows.empty:
         return Finding(
-            claim, rule, NOT_TESTABLE, f"fewer than two approaches finished with {fitness}"
+            "3", fitness, claim, rule, NOT_TESTABLE, "fewer than two approaches finished"
         )
     verdicts = [similar(r) for r in rows.itertuples(index=False)]
     counts = {v: verdicts.count(v) for v in STRENGTH if v in verdicts}
@@ -185,26 +203,65 @@ def _alike(study: pd.DataFrame, fitness: str) -> Finding:
     evidence = ", ".join(f"{n} pairs {v}" for v, n in counts.items()) + (
         "; " + "; ".join(describe(pd.Series(r._asdict())) for r in shown[:6]) if shown else ""
     )
-    return Finding(claim, rule, weakest(verdicts), evidence)
+    return Finding("3", fitness, claim, rule, weakest(verdicts), evidence)
 
 
-def _filled_differently(coverage: pd.DataFrame, maps: list[str], fitness: str) -> Finding:
+def _filled_differently(common: pd.DataFrame, maps: list[str], fitness: str) -> Finding:
     """Returns the verdict on "the maps filled their repertoires differently": every pair
-    of MAP-Elites approaches differs in own-grid coverage."""
+    of MAP-Elites approaches differs in coverage of the common grid (each trial's elites
+    placed on MAP-LIS's grid), the one coverage that compares across approaches."""
     claim = (
-        f"With {label(fitness)}, the four MAP-Elites approaches filled their repertoires "
+        f"With {label(fitness)}, the four MAP-Elites approaches filled the repertoires "
         "quite differently (Discussion)."
     )
-    rule = f"every pair of maps differs in median coverage of its own grid; {RULE}"
+    rule = (
+        "every pair of maps differs in median coverage of the common (MAP-LIS) grid; an own "
+        f"grid's coverage does not compare across approaches; {RULE}"
+    )
     pairs = [(a, b) for i, a in enumerate(maps) for b in maps[i + 1 :]]
-    rows = [r for r in (pair_row(coverage, fitness, a, b) for a, b in pairs) if r is not None]
+    rows = [r for r in (pair_row(common, fitness, a, b) for a, b in pairs) if r is not None]
     if not rows:
-        return Finding(claim, rule, NOT_TESTABLE, f"no two maps finished with {fitness}")
+        return Finding("10", fitness, claim, rule, NOT_TESTABLE, "no two maps finished")
     verdicts = [
         REPRODUCED if judge(r, lower=r.a12 < 0.5) == REPRODUCED else NOT_REPRODUCED for r in rows
     ]
-    evidence = "; ".join(describe(r, "median coverage") for r in rows)
-    return Finding(claim, rule, weakest(verdicts), evidence)
+    evidence = "; ".join(describe(r, "median common coverage") for r in rows)
+    return Finding("10", fitness, claim, rule, weakest(verdicts), evidence)
+
+
+def _highly_correlated(measures: pd.DataFrame, fitness: str) -> Finding:
+    """Returns the verdict on "MAP-WH's dimensions are highly correlated with the
+    fitness": the median over MAP-WH's trials of its largest |Spearman rho| between a
+    descriptor and the elites' loss, against `HIGH_CORRELATION`."""
+    claim = (
+        f"With {label(fitness)}, the width and height, MAP-WH's dimensions, are highly "
+        "correlated with the fitness (Prototyping, Discussion)."
+    )
+    rule = (
+        "the median over MAP-WH's trials of the largest |Spearman rho| between a descriptor "
+        f"and the elites' loss is high (above {HIGH_CORRELATION}); {RULE}"
+    )
+    rhos = measures.descriptor_correlation[
+        (measures.approach == "MAP-WH") & (measures.fitness == fitness)
+    ].dropna()
+    if rhos.size < 2:
+        return Finding("12", fitness, claim, rule, NOT_TESTABLE, "fewer than two MAP-WH trials")
+    median = float(rhos.median())
+    low, high = median_interval(rhos.to_numpy())
+    others = (
+        measures[
+            measures.approach.map(is_map_elites)
+            & (measures.approach != "MAP-WH")
+            & (measures.fitness == fitness)
+        ]
+        .groupby("approach")
+        .descriptor_correlation.median()
+    )
+    evidence = (
+        f"MAP-WH median |rho| {median:.2f} [{low:.2f}, {high:.2f}] over {rhos.size} trials"
+        + "".join(f"; {a} {m:.2f}" for a, m in others.dropna().items())
+    )
+    return Finding("12", fitness, claim, rule, above(median, low, high, HIGH_CORRELATION), evidence)
 
 
 def _trade_off(measures: pd.DataFrame, nsga: str) -> Finding:
@@ -222,79 +279,116 @@ def _trade_off(measures: pd.DataFrame, nsga: str) -> Finding:
     ]
     fronts = by.front_size
     if fronts.empty:
-        return Finding(claim, rule, NOT_TESTABLE, "no finished NSGA-II population")
+        return Finding("7", "", claim, rule, NOT_TESTABLE, "no finished NSGA-II population")
     medians = by.groupby("fitness").front_size.median()
     evidence = "; ".join(
         f"{label(f)}: median front {m:.0f}, smallest {by.front_size[by.fitness == f].min():.0f}"
         for f, m in medians.items()
     )
-    return Finding(claim, rule, REPRODUCED if fronts.min() >= 3 else NOT_REPRODUCED, evidence)
+    verdict = REPRODUCED if fronts.min() >= 3 else NOT_REPRODUCED
+    return Finding("7", "", claim, rule, verdict, evidence)
 
 
-def _fsl_more_diverse(measures: pd.DataFrame) -> Finding:
-    """Returns the verdict on "F_sl could in theory lead to more diverse paths"."""
-    claim = "F_sl could in theory lead to more diverse paths than F_p (Discussion)."
-    rule = (
-        "a higher path diversity with F_sl than with F_p, pooled over the study's "
-        f"approaches; {RULE}"
+def _fsl_more_diverse(measures: pd.DataFrame, searches: list[str]) -> Finding:
+    """Returns the verdict on "F_sl could in theory lead to more diverse paths", judged
+    per approach (pooling would hide approaches that go opposite ways)."""
+    claim = (
+        "F_sl could in theory lead to more diverse paths than F_p, since it allows more "
+        "room for how to achieve its properties (Discussion; the paper's conjecture, "
+        "which its own runs did not bear out)."
     )
-    return _two_samples(measures, "path_diversity", "Fsl", "Fp", claim, rule, lower=False)
+    rule = (
+        "for every study approach, a higher path diversity with F_sl than with F_p "
+        f"(Holm over the approaches); {RULE}"
+    )
+    return _fitness_versus(
+        "13", measures, "path_diversity", searches, ("Fsl", "Fp"), claim, rule, lower=False
+    )
 
 
-def _two_samples(
+def _fitness_versus(
+    number: str,
     measures: pd.DataFrame,
     column: str,
-    first: str,
-    second: str,
+    approaches: list[str],
+    fitnesses: tuple[str, str],
     claim: str,
     rule: str,
     lower: bool,
 ) -> Finding:
-    """Returns the verdict on "fitness `first` gives a better `column` than `second`",
-    pooled over approaches (one test: Holm's p is the test's own)."""
-    x = measures[column][(measures.fitness == first) & measures[column].notna()].to_numpy()
-    y = measures[column][(measures.fitness == second) & measures[column].notna()].to_numpy()
-    if not (x.size and y.size):
-        return Finding(claim, rule, NOT_TESTABLE, f"the grid lacks finished {first} or {second}")
-    _, p, _ = mann_whitney(x, y)
-    low, high = a12_interval(x, y)
-    row = pd.Series(
-        {"approach_a": first, "approach_b": second, "median_a": float(np.median(x)),
-         "median_b": float(np.median(y)), "a12": a12(x, y), "a12_low": low, "a12_high": high,
-         "p_holm": p}
-    )  # fmt: skip
-    verdict = judge(row, lower)
-    evidence = f"{describe(row, f'median {column}')}, {x.size} and {y.size} trials"
-    return Finding(claim, rule, verdict, evidence)
+    """Returns the verdict on "for each approach, the first fitness gives a better
+    `column` than the second" (a Mann–Whitney test per approach, Holm over them)."""
+    first, second = fitnesses
+    rows = []
+    for approach in approaches:
+        mine = measures[(measures.approach == approach) & measures[column].notna()]
+        x = mine[column][mine.fitness == first].to_numpy()
+        y = mine[column][mine.fitness == second].to_numpy()
+        if x.size and y.size:
+            low, high = a12_interval(x, y)
+            rows.append(
+                {"approach_a": f"{label(approach)} {label(first)}",
+                 "approach_b": label(second), "median_a": float(np.median(x)),
+                 "median_b": float(np.median(y)), "a12": a12(x, y), "a12_low": low,
+                 "a12_high": high, "p": mann_whitney(x, y)[1]}
+            )  # fmt: skip
+    if not rows:
+        return Finding(number, "", claim, rule, NOT_TESTABLE, "no approach has both fitnesses")
+    table = pd.DataFrame(rows)
+    table["p_holm"] = holm(table.p.to_numpy())
+    verdicts = [judge(r, lower) for _, r in table.iterrows()]
+    evidence = "; ".join(
+        f"{describe(r, f'median {column}')}: {v}"
+        for (_, r), v in zip(table.iterrows(), verdicts, strict=True)
+    )
+    return Finding(number, "", claim, rule, weakest(verdicts), evidence)
 
 
-def _oversized(grid: GridData) -> Finding:
-    """Returns the verdict on "F_sl evolves oversized linkages" via best-path sizes."""
-    sizes = best_path_sizes(grid)
-    sizes = sizes[sizes.approach != BASELINE]
+def _oversized(sizes: pd.DataFrame, nsga: str) -> Finding:
+    """Returns the verdict on "with the exception of NSGA-II, all approaches created
+    linkages too large to be realised with F_sl", from best-path sizes: every approach
+    but NSGA-II has larger best paths with F_sl than with F_p, and NSGA-II's F_sl paths
+    are smaller than every other approach's."""
     claim = (
-        "With F_sl, the approaches created linkages that were too large to be realised "
-        "(Results, Discussion)."
+        "With the exception of NSGA-II, all approaches created linkages that were too large "
+        "to be successfully realised on the robot when combined with F_sl (Results)."
     )
     rule = (
-        "the best-ever paths (the larger of width and height) are larger with F_sl than "
-        f"with F_p, pooled over the study's approaches; {RULE}"
+        "for every approach but NSGA-II, larger best-ever paths (the larger of width and "
+        "height) with F_sl than with F_p (Holm over the approaches), and NSGA-II's F_sl "
+        f"paths smaller than every other approach's (the study family); {RULE}"
     )
-    return _two_samples(sizes, "size", "Fsl", "Fp", claim, rule, lower=False)
+    others = ordered([a for a in sizes.approach.unique() if a != nsga], APPROACHES)
+    larger = _fitness_versus("4", sizes, "size", others, ("Fsl", "Fp"), claim, rule, lower=False)
+    if larger.verdict == NOT_TESTABLE:
+        return larger
+    exception = versus(
+        pairwise_tests(sizes.assign(status="FINISHED"), "size"),
+        "4",
+        claim,
+        rule,
+        "Fsl",
+        [(nsga, a) for a in others],
+        what="median size",
+    )
+    verdict = weakest([v for v in (larger.verdict, exception.verdict) if v != NOT_TESTABLE])
+    evidence = f"{larger.evidence}; the exception: {exception.evidence}"
+    return Finding("4", "", claim, rule, verdict, evidence)
 
 
 def _against_random(
-    grid: GridData, tests: pd.DataFrame, measures: pd.DataFrame, searches: list[str]
+    measures: pd.DataFrame, tests: pd.DataFrame, fitnesses: list[str], searches: list[str]
 ) -> list[Finding]:
     """Returns the baseline checks (not in the study): every search beats RANDOM on best
     loss, and MAP-LIS fills the MAP-LIS grid better than RANDOM, per fitness."""
     baseline = tests[tests.family == "baseline"]
     common = pairwise_tests(measures, "common_qd_score", higher_is_better=True)
     out = []
-    for fitness in grid.fitnesses():
+    for fitness in fitnesses:
         out.append(
             versus(
                 baseline,
+                "R1",
                 f"With {label(fitness)}, every search beats random sampling (not in the study).",
                 f"lower median best loss than RANDOM at the same budget (baseline family); {RULE}",
                 fitness,
@@ -304,6 +398,7 @@ def _against_random(
         out.append(
             versus(
                 common[common.family == "baseline"],
+                "R2",
                 f"With {label(fitness)}, MAP-LIS fills the MAP-LIS grid better than random "
                 "sampling (not in the study).",
                 f"higher median QD-score on the common (MAP-LIS) grid than RANDOM; {RULE}",

@@ -63,6 +63,23 @@ def a12_interval(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
+def median_interval(x: np.ndarray) -> tuple[float, float]:
+    """Returns the 95 % bootstrap interval of the median of x (n,), as `a12_interval`
+    computes its own (percentile, 9,999 resamples, seeded); NaN for fewer than two."""
+    if np.size(x) < 2:
+        return np.nan, np.nan
+    result = bootstrap(
+        (np.asarray(x, dtype=float),),
+        np.median,
+        n_resamples=BOOTSTRAP_RESAMPLES,
+        confidence_level=CONFIDENCE,
+        method="percentile",
+        vectorized=True,
+        rng=np.random.default_rng(0),
+    )
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
 def a12_magnitude(value: float) -> str:
     """Returns the effect-size label of an A12 value (negligible, small, medium, large)."""
     distance = max(value, 1.0 - value)

@@ -29,7 +29,10 @@ RULE = (
     f"interval lies within [{1 - SIMILAR_A12:.2f}, {SIMILAR_A12}] (less than a large effect), "
     "not reproduced when a pair differs by the first rule, and otherwise not shown (the "
     "intervals are too wide at this number of trials). A claim over several pairs takes "
-    "its weakest pair's verdict."
+    "its weakest pair's verdict. A claim that a measure is high is reproduced when the 95 % "
+    "bootstrap interval of its median lies above the level, direction only when the median "
+    "does without the interval, contradicted when the interval lies below, otherwise not "
+    "reproduced."
 )
 """The one rule every verdict of the report follows (docs/results.md states it too)."""
 
@@ -39,6 +42,9 @@ class Finding:
     """One claim of the study and what this grid says about it.
 
     Attributes:
+        number: the claim's number in docs/results.md ("1".."13"; "R1", "R2" for the
+            checks against random sampling, which are not the study's).
+        fitness: the fitness the finding is judged under; "" for a claim across both.
         claim: the study's claim, in words.
         rule: the test applied to this grid.
         verdict: one of `STRENGTH` by `RULE`, or NOT_TESTABLE; "not judged: a pipeline
@@ -46,6 +52,8 @@ class Finding:
         evidence: the numbers behind the verdict.
     """
 
+    number: str
+    fitness: str
     claim: str
     rule: str
     verdict: str
@@ -97,6 +105,16 @@ def similar(row: pd.Series) -> str:
     return REPRODUCED if inside else NOT_SHOWN
 
 
+def above(median: float, low: float, high: float, level: float) -> str:
+    """Returns the verdict (`RULE`) on "the measure is high": its median and the 95 %
+    interval of the median (`stats.median_interval`) against `level`."""
+    if low > level:
+        return REPRODUCED
+    if high < level:
+        return CONTRADICTED
+    return DIRECTION_ONLY if median > level else NOT_REPRODUCED
+
+
 def weakest(verdicts: list[str]) -> str:
     """Returns the weakest of several pairs' verdicts (`STRENGTH`)."""
     return max(verdicts, key=STRENGTH.index)
@@ -104,6 +122,7 @@ def weakest(verdicts: list[str]) -> str:
 
 def versus(
     tests: pd.DataFrame,
+    number: str,
     claim: str,
     rule: str,
     fitness: str,
@@ -114,7 +133,9 @@ def versus(
     """Returns the finding "in each pair (x, y), x does better than y" under `fitness`."""
     rows = [r for r in (pair_row(tests, fitness, x, y) for x, y in pairs) if r is not None]
     if not rows:
-        return Finding(claim, rule, NOT_TESTABLE, f"no finished pair of trials with {fitness}")
+        return Finding(
+            number, fitness, claim, rule, NOT_TESTABLE, f"no finished pair of trials with {fitness}"
+        )
     verdicts = [judge(r, lower) for r in rows]
     evidence = "; ".join(f"{describe(r, what)}: {v}" for r, v in zip(rows, verdicts, strict=True))
-    return Finding(claim, rule, weakest(verdicts), evidence)
+    return Finding(number, fitness, claim, rule, weakest(verdicts), evidence)
