@@ -21,12 +21,15 @@ class Approach:
         label: the spelling in figures ("NSGA-II").
         family: "population" (EA, NSGA-II), "map-elites" or "baseline" (random sampling).
         multi_objective: optimises the two-objective variant of its fitness.
+        learned_grid: its grid's dimensions are learned anew in each trial (AURORA), so
+            two trials' cells are not the same cells.
     """
 
     name: str
     label: str
     family: str
     multi_objective: bool = False
+    learned_grid: bool = False
 
     @property
     def repertoire(self) -> bool:
@@ -58,7 +61,7 @@ APPROACH_TABLE: tuple[Approach, ...] = (
     Approach("MAP-WH", "MAP-WH", "map-elites"),
     Approach("MAP-LIS", "MAP-LIS", "map-elites"),
     Approach("MAP-ST", "MAP-ST", "map-elites"),
-    Approach("MAP-AU", "MAP-AU", "map-elites"),
+    Approach("MAP-AU", "MAP-AU", "map-elites", learned_grid=True),
     Approach("RANDOM", "RANDOM", "baseline"),
 )
 FITNESS_TABLE: tuple[Fitness, ...] = (
@@ -78,6 +81,8 @@ BASELINE = "RANDOM"
 """The random-sampling baseline, compared with each approach beside the study's own pairs."""
 REPERTOIRE_APPROACHES: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.repertoire)
 """Approaches that keep a repertoire rather than a population."""
+LEARNED: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.learned_grid)
+"""Approaches whose grid is learned per trial: their trials' cells do not pool."""
 MULTI_OBJECTIVE: tuple[str, ...] = tuple(a.name for a in APPROACH_TABLE if a.multi_objective)
 """Approaches that optimise the two-objective variant of their fitness."""
 

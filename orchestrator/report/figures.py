@@ -11,7 +11,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
 from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
-from linkevo.sim.study import is_map_elites, label
+from linkevo.sim.study import LEARNED, is_map_elites, label
 from linkevo.workers.plots.repertoire import (
     DOWNSAMPLED,
     LOSS_CMAP,
@@ -32,6 +32,21 @@ CONVERGENCE_METRICS: tuple[tuple[str, str], ...] = (
 )
 MAX_DIMS = 4
 """The most descriptor dimensions a map has (bin_0..bin_3)."""
+PAGE_WIDTH_IN = 6.5
+"""A report figure is at most this wide (a letter or A4 page's text width), so it is
+shown at its own size or larger on a page and in the HTML report."""
+MIN_FONT_PT = 7.0
+"""The smallest text on a report figure at page width."""
+REPORT_RC = {
+    "font.size": MIN_FONT_PT,
+    "axes.titlesize": 8.0,
+    "axes.labelsize": MIN_FONT_PT,
+    "xtick.labelsize": MIN_FONT_PT,
+    "ytick.labelsize": MIN_FONT_PT,
+    "legend.fontsize": MIN_FONT_PT,
+    "figure.titlesize": 8.0,
+}
+"""matplotlib settings every report figure is drawn under (`build.report_figures`)."""
 
 
 def study_title(grid: GridData, fitness: str | None = None) -> str:
@@ -105,8 +120,8 @@ def _trial_count(grid: GridData, approach: str, fitness: str) -> str:
 def best_loss_figure(grid: GridData) -> ReportFigure:
     """Returns box plots of the best loss per trial, one panel per fitness."""
     fitnesses, approaches = grid.fitnesses(), grid.approaches()
-    fig = Figure(figsize=(4.2 * len(fitnesses), 4.0), layout="constrained")
-    axes = fig.subplots(1, len(fitnesses), squeeze=False)[0]
+    fig = Figure(figsize=(PAGE_WIDTH_IN, 2.9 * len(fitnesses) + 0.4), layout="constrained")
+    axes = fig.subplots(len(fitnesses), 1, squeeze=False)[:, 0]
     rng = np.random.default_rng(0)
     done = grid.finished()
     for ax, fitness in zip(axes, fitnesses, strict=True):
@@ -136,12 +151,12 @@ def best_loss_figure(grid: GridData) -> ReportFigure:
             ticks.append(
                 f"{label(approach)}\nn={values.size}" + (f"\n{lost} not finished" if lost else "")
             )
-        ax.set_xticks(positions, ticks, fontsize=7)
+        ax.set_xticks(positions, ticks)
         ax.set_xlim(0.4, len(approaches) + 0.6)
         ax.set_title(label(fitness))
         ax.set_ylabel("best loss")
         ax.grid(axis="y", alpha=0.3)
-    fig.suptitle(study_title(grid), fontsize=8)
+    fig.suptitle(study_title(grid))
     return ReportFigure(
         name="best_loss",
         title="Best loss per trial",
@@ -159,12 +174,12 @@ def _nested_axis(ax, axis: str, space: DescriptorSpace, outer: int, inner: int) 
     r = space.resolution
     centres = np.arange(r) * r + (r - 1) / 2
     set_ticks = ax.set_xticks if axis == "x" else ax.set_yticks
-    set_ticks(centres, [str(i) for i in range(r)], fontsize=6)
+    set_ticks(centres, [str(i) for i in range(r)])
     edges = np.arange(1, r) * r - 0.5
     lines = ax.vlines if axis == "x" else ax.hlines
     lines(edges, -0.5, r * r - 0.5, color="0.8", lw=0.4)
     text = f"{space.names[outer]} (outer bins) › {space.names[inner]} (inner, 0–{r - 1})"
-    (ax.set_xlabel if axis == "x" else ax.set_ylabel)(text, fontsize=7)
+    (ax.set_xlabel if axis == "x" else ax.set_ylabel)(text)
 
 
 def _folded_map(grid: GridData, approach: str, fitness: str) -> tuple[np.ndarray, DescriptorSpace]:
@@ -189,13 +204,14 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
     if not approaches:
         return None
     fitnesses = grid.fitnesses()
-    fig = Figure(figsize=(3.4 * len(approaches) + 1.0, 3.4 * len(fitnesses)), layout="constrained")
-    axes = fig.subplots(len(fitnesses), len(approaches), squeeze=False)
-    for row, fitness in enumerate(fitnesses):
+    fig = Figure(figsize=(PAGE_WIDTH_IN, 2.9 * len(approaches) + 0.6), layout="constrained")
+    axes = fig.subplots(len(approaches), len(fitnesses), squeeze=False)
+    done = grid.finished()
+    for col, fitness in enumerate(fitnesses):
         images = [_folded_map(grid, approach, fitness) for approach in approaches]
         finite = np.concatenate([image[np.isfinite(image)] for image, _ in images])
         norm = loss_norm(finite)
-        for col, (approach, (image, space)) in enumerate(zip(approaches, images, strict=True)):
+        for row, (approach, (image, space)) in enumerate(zip(approaches, images, strict=True)):
             ax = axes[row, col]
             shown = ax.imshow(
                 np.ma.masked_invalid(image),
@@ -205,22 +221,28 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
                 interpolation="nearest",
                 aspect="equal",
             )
+            cells = f"{int(np.isfinite(image).sum()):,} cells filled"
+            if approach in LEARNED:
+                own = done.coverage[(done.approach == approach) & (done.fitness == fitness)]
+                cells = (
+                    f"POOLED over {own.size} learned grids,\n{cells}; each trial "
+                    f"{own.median():.2f} of its own"
+                )
             ax.set_title(
-                f"{label(approach)}, {label(fitness)}: {int(np.isfinite(image).sum())} cells "
-                f"filled\n{_trial_count(grid, approach, fitness)}",
-                fontsize=8,
+                f"{label(approach)}, {label(fitness)}: {cells}\n"
+                f"{_trial_count(grid, approach, fitness)}"
             )
             if space.dims == 4:
                 _nested_axis(ax, "y", space, 0, 2)
                 _nested_axis(ax, "x", space, 1, 3)
             else:
-                ax.set_ylabel(f"{space.names[0]} (bin)", fontsize=7)
-                ax.set_xlabel(f"{space.names[1]} (bin)", fontsize=7)
-                ax.tick_params(labelsize=6)
+                ax.set_ylabel(f"{space.names[0]} (bin)")
+                ax.set_xlabel(f"{space.names[1]} (bin)")
         fig.colorbar(
-            shown, ax=axes[row, :].tolist(), shrink=0.8, label=f"best {LOSS_LABEL}", extend="max"
-        )
-    fig.suptitle(study_title(grid), fontsize=9)
+            shown, ax=axes[:, col].tolist(), shrink=0.6, label=f"best {LOSS_LABEL}",
+            extend="max", location="bottom",
+        )  # fmt: skip
+    fig.suptitle(study_title(grid))
     return ReportFigure(
         name="repertoire_maps",
         title="Repertoire maps",
@@ -228,7 +250,9 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
             "Best loss found in each cell over all finished trials of each MAP-Elites "
             "approach; blank cells were never filled. 4-D maps are folded to 100 × 100: "
             "row = b0·10 + b2, column = b1·10 + b3, so tick labels give the outer bins and "
-            "each 10 × 10 block spans the inner pair."
+            "each 10 × 10 block spans the inner pair. MAP-AU learns its grid anew in every "
+            "trial, so its pooled map lays differently defined cells over each other: its "
+            "panel is marked POOLED and gives the per-trial coverage beside the pooled count."
         ),
         figure=fig,
     )
@@ -265,10 +289,15 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
         return None
     maps = [p for p in panels if is_map_elites(p[0])]
     strips = [p for p in panels if not is_map_elites(p[0])]
-    groups = [g for g in (maps, strips) if g]
-    ncols = max(len(g) for g in groups)
-    heights = [5.0] * bool(maps) + [1.4] * bool(strips)
-    fig = Figure(figsize=(3.3 * ncols + 0.8, 0.62 * sum(heights) + 0.6), layout="constrained")
+    ncols = min(2, len(panels))
+    groups = [maps[i : i + ncols] for i in range(0, len(maps), ncols)]
+    groups += [strips[i : i + ncols] for i in range(0, len(strips), ncols)]
+    heights = [5.0 if is_map_elites(g[0][0]) else 1.4 for g in groups]
+    width = PAGE_WIDTH_IN / ncols - 0.4  # a panel's side, beside its colour bar's share
+    fig = Figure(
+        figsize=(PAGE_WIDTH_IN, width / 5.0 * sum(heights) + 0.4 * len(groups) + 0.9),
+        layout="constrained",
+    )
     axes = fig.subplots(len(groups), ncols, squeeze=False, height_ratios=heights)
     losses = np.concatenate([c.loss.to_numpy(dtype=float) for _, _, c in panels])
     norm = loss_norm(losses)
@@ -282,10 +311,10 @@ def path_maps_figure(grid: GridData, fitness: str) -> ReportFigure | None:
             approach, trial, chosen = group[col]
             strip = not is_map_elites(approach)
             shape = (1, STRIP_PATHS) if strip else (DOWNSAMPLED, DOWNSAMPLED)
-            lines = draw_paths(ax, chosen, shape, norm)
-            ax.set_title(f"{label(approach)}, {label(fitness)}: {trial.trial_key}", fontsize=8)
+            lines = draw_paths(ax, chosen, shape, norm, label_size=MIN_FONT_PT)
+            ax.set_title(f"{label(approach)}, {label(fitness)}: {trial.trial_key}")
     fig.colorbar(lines, ax=axes.ravel().tolist(), shrink=0.6, label=LOSS_LABEL, extend="max")
-    fig.suptitle(study_title(grid, fitness), fontsize=8)
+    fig.suptitle(study_title(grid, fitness))
     return ReportFigure(
         name=f"paths_{fitness}",
         title=f"Example paths, {label(fitness)}",
@@ -317,7 +346,7 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
     if history.empty or not metrics:
         return None
     fitnesses = grid.fitnesses()
-    fig = Figure(figsize=(4.6 * len(fitnesses), 2.6 * len(metrics) + 0.8), layout="constrained")
+    fig = Figure(figsize=(PAGE_WIDTH_IN, 2.0 * len(metrics) + 1.0), layout="constrained")
     axes = fig.subplots(len(metrics), len(fitnesses), squeeze=False, sharex=True)
     for col, fitness in enumerate(fitnesses):
         for row, (metric, name) in enumerate(metrics):
@@ -332,17 +361,17 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
                 q = by_step[metric].quantile([0.25, 0.5, 0.75]).unstack()
                 ax.plot(x, q[0.5], lw=1.2, label=label(approach), color=f"C{i}")
                 ax.fill_between(x, q[0.25], q[0.75], color=f"C{i}", alpha=0.2, lw=0)
-            ax.set_title(f"{name}, {label(fitness)}", fontsize=9)
-            ax.set_ylabel(name, fontsize=8)
-            ax.xaxis.set_major_locator(MaxNLocator(5))
+            ax.set_title(f"{name}, {label(fitness)}")
+            ax.set_ylabel(name)
+            ax.xaxis.set_major_locator(MaxNLocator(4))
             thousands(ax)
-            ax.tick_params(labelsize=7, labelbottom=True)
+            ax.tick_params(labelbottom=True)
             ax.grid(alpha=0.3)
         axes[-1, col].set_xlabel("evaluations")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     if handles:
-        fig.legend(handles, labels, loc="outside lower center", ncols=len(handles), fontsize=8)
-    fig.suptitle(study_title(grid), fontsize=9)
+        fig.legend(handles, labels, loc="outside lower center", ncols=min(len(handles), 4))
+    fig.suptitle(study_title(grid))
     return ReportFigure(
         name="convergence",
         title="Convergence",

@@ -193,14 +193,14 @@ def test_each_figure_has_its_panels_and_labels(loaded):
     images = [ax for ax in maps.axes if ax.images]
     assert [ax.get_title().split(":")[0] for ax in images] == [
         "MAP-WH, F_p",
-        "MAP-ST, F_p",
         "MAP-WH, F_sl",
+        "MAP-ST, F_p",
         "MAP-ST, F_sl",
     ]
     assert images[0].get_xlabel() == "width (bin)" and images[0].get_ylabel() == "height (bin)"
-    assert "mean_beam_length (outer bins)" in images[1].get_ylabel()
-    assert "moving_share (inner" in images[1].get_xlabel()
-    assert images[1].images[0].get_array().shape == (100, 100)
+    assert "mean_beam_length (outer bins)" in images[2].get_ylabel()
+    assert "moving_share (inner" in images[2].get_xlabel()
+    assert images[2].images[0].get_array().shape == (100, 100)
 
     paths = fig.path_maps_figure(loaded, "Fp").figure
     titled = [ax.get_title().split(":")[0] for ax in paths.axes if ax.get_title()]
@@ -272,10 +272,14 @@ def test_findings_are_checked_with_their_numbers(grid, loaded):
     assert "pairs" in similar.evidence
     findings_csv = pd.read_csv(result.out_dir / "findings.csv")
     assert findings_csv.verdict.tolist() == [f.verdict for f in result.findings]
-    oversized = "With F_sl, the approaches created linkages that were too large to be realised"
-    assert verdicts[f"{oversized} (Results, Discussion)."].verdict == REPRODUCED
+    assert findings_csv.number.astype(str).tolist() == [f.number for f in result.findings]
+    trials = pd.read_csv(result.out_dir / "trials.csv")
+    assert {"stagnation", "descriptor_correlation", "front_size"} <= set(trials.columns)
+    sizes = pd.read_csv(result.out_dir / "path_sizes.csv")
+    again = check_findings(trials, sizes, result.tests, loaded.config.get("evaluations"))
+    assert [f.verdict for f in again] == [f.verdict for f in result.findings]
     without_ea = pairwise_tests(loaded.trials[loaded.trials.approach != "EA"])
-    assert check_findings(loaded, without_ea)[0].verdict == NOT_TESTABLE
+    assert check_findings(trials, sizes, without_ea, None)[0].verdict == NOT_TESTABLE
 
 
 def test_html_is_self_contained_and_report_is_logged_to_the_parent_run(grid):
@@ -485,3 +489,25 @@ def test_a_report_that_fails_half_way_leaves_the_previous_one_whole(tmp_path, mo
         build_report(written.uri, None, out, log_to_mlflow=False)
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert not list(tmp_path.glob(".out.new-*"))  # no staging folder left behind
+
+
+def test_every_report_figure_is_readable_at_page_width(loaded):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.text import Text
+
+    from linkevo.orchestrator.report.build import report_figures
+
+    made = report_figures(loaded)
+    assert {m.name for m in made} >= {"best_loss", "repertoire_maps", "paths_Fp", "convergence"}
+    for item in made:
+        FigureCanvasAgg(item.figure).draw()  # ticks and their labels exist once drawn
+        scale = min(1.0, fig.PAGE_WIDTH_IN / item.figure.get_figwidth())
+        texts = [
+            t for t in item.figure.findobj(Text) if t.get_visible() and t.get_text().strip()
+        ]
+        assert texts
+        smallest = min(t.get_fontsize() for t in texts) * scale
+        assert smallest >= fig.MIN_FONT_PT, (item.name, smallest)
+    maps = next(m for m in made if m.name == "repertoire_maps")
+    titles = [ax.get_title() for ax in maps.figure.axes if ax.get_title()]
+    assert any("MAP-AU" in t and "POOLED" in t for t in titles) == ("MAP-AU" in SPEC.approaches)

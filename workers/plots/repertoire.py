@@ -77,10 +77,12 @@ def select_paths(archive: pd.DataFrame, approach: str) -> pd.DataFrame:
     return chosen.assign(row=0, col=np.arange(len(chosen))).reset_index(drop=True)
 
 
-def draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize):
-    """Draws each chosen path scaled into its grid cell, with its size in the corner; the
-    crank angles where the linkage fails are left as gaps (a path is closed only where
-    its last and first angles both assemble).
+def draw_paths(
+    ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize, label_size: float = 5.0
+):
+    """Draws each chosen path scaled into its grid cell, with its size in the corner (at
+    `label_size` pt); the crank angles where the linkage fails are left as gaps (a path is
+    closed only where its last and first angles both assemble).
 
     Returns the paths' LineCollection (coloured by loss under `norm`).
     """
@@ -99,7 +101,7 @@ def draw_paths(ax, chosen: pd.DataFrame, shape: tuple[int, int], norm: Normalize
         for run in assembled_runs(keep):
             segments.append(points[run])
             colours.append(float(loss))
-        ax.text(col + 0.96, row + 0.04, f"{size:.1f}", ha="right", va="bottom", fontsize=5)
+        ax.text(col + 0.96, row + 0.04, f"{size:.1f}", ha="right", va="bottom", fontsize=label_size)
     lines = LineCollection(segments, cmap=PATH_CMAP, norm=norm, linewidths=0.9)
     lines.set_array(np.array(colours))
     ax.add_collection(lines)
