@@ -13,7 +13,8 @@ from typing import TypeVar
 from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN
 from linkevo.hardware.errors import ConfigError
 from linkevo.hardware.protocol import MAX_ID
-from linkevo.sim.gait import GaitConfig, limits
+from linkevo.sim.gait import GaitConfig, limits, range_error
+from linkevo.sim.robot import Physics
 
 T = TypeVar("T")
 
@@ -81,6 +82,7 @@ class RobotConfig:
     align: AlignConfig
     safety: SafetyConfig
     motors: tuple[MotorConfig, ...]
+    physics: Physics = field(default_factory=Physics)
 
     @property
     def motor_ids(self) -> list[int]:
@@ -95,7 +97,13 @@ class RobotConfig:
         return dataclasses.replace(self, bus=dataclasses.replace(self.bus, port=port))
 
 
-_SECTIONS = {"bus": BusConfig, "gait": GaitConfig, "align": AlignConfig, "safety": SafetyConfig}
+_SECTIONS = {
+    "bus": BusConfig,
+    "gait": GaitConfig,
+    "align": AlignConfig,
+    "safety": SafetyConfig,
+    "physics": Physics,
+}
 _TYPES = {"int": (int,), "float": (int, float), "str": (str,)}
 
 
@@ -116,11 +124,9 @@ def _build(cls: type[T], raw: object, where: str) -> T:
         meta = fields[name].metadata
         if "choices" in meta and value not in meta["choices"]:
             raise ConfigError(f"{key} = {value!r} is not allowed; choose one of {meta['choices']}")
-        low, high = meta.get("low"), meta.get("high")
-        too_high = high is not None and (value >= high if meta["open_high"] else value > high)
-        if (low is not None and value < low) or too_high:
-            bracket = ")" if meta.get("open_high") else "]"
-            raise ConfigError(f"{key} = {value!r} is out of range [{low}, {high}{bracket}")
+        wrong = range_error(key, value, meta) if "low" in meta else None
+        if wrong:
+            raise ConfigError(wrong)
     missing = [
         n
         for n, f in fields.items()

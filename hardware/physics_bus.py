@@ -47,8 +47,8 @@ class PhysicsWorld:
     Args:
         config: the robot config (its motors' names are the slots they drive).
         leg: the leg linkage on every slot.
-        floor: the floor (`sim.robot.FLOORS`).
-        frame, motor: the chassis and the motor model (defaults: the study's robot).
+        floor: the floor (`sim.robot.FLOORS`), its contact as the config's `physics` says.
+        frame, motor: the chassis and the motor model (defaults: the config's `physics`).
     """
 
     def __init__(
@@ -66,8 +66,9 @@ class PhysicsWorld:
                 f"the robot config's motors are named {names}; the physics mounts a leg where "
                 f"its motor's name says, so name them {', '.join(LEG_SLOTS)}"
             )
-        self.motor = motor or Motor()
+        self.motor = motor or config.physics.motor()
         phases = {m.name: m.phase_rad for m in config.motors}  # set down aligned
+        floor, frame = config.physics.floor(floor.name), frame or config.physics.frame()
         self.robot = build_lean_robot(
             dict.fromkeys(LEG_SLOTS, leg), phases, floor, frame=frame, motor=self.motor
         )

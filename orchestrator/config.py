@@ -12,6 +12,7 @@ from typing import Any
 
 from linkevo.orchestrator.config_text import apply_overrides
 from linkevo.sim.errors import LinkevoError
+from linkevo.sim.robot import PHYSICS_KEYS, Physics
 from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
@@ -114,6 +115,10 @@ class GridConfig:
         surrogate: the walking MAP-Elites trials walk only the candidates the learned walk
             model, fitted on each trial's walks as it goes, predicts could enter or improve
             the archive (`workers.walk_surrogate`); false (the default) walks every one.
+        physics: the simulated robot's parameters that differ from the study's robot
+            (`sim.robot.Physics`; a `[physics]` table, as the robot config's, e.g. the
+            one `linkevo hexapod calibrate` writes), for every walk of the grid's trials
+            (fitness F_w, `walk_rerank`); empty (the default): the study's robot.
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -147,6 +152,7 @@ class GridConfig:
     walk_batch: int = DEFAULT_WALK_BATCH
     seed_from: str = ""
     surrogate: bool = False
+    physics: dict[str, float] = field(default_factory=dict)
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -173,7 +179,8 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank`, `seed_from` and `surrogate` count only when they are on, and `walks`
+        `walk_rerank`, `seed_from`, `surrogate` and `physics` count only when they are
+        on, and `walks`
         and `walk_batch` only for a grid with walking trials, so grids without them keep
         their ids. `trials` does not
         count: a trial's seed depends on its index, not on how many the grid holds, so a
@@ -187,6 +194,8 @@ class GridConfig:
             del out["seed_from"]
         if not out["surrogate"]:
             del out["surrogate"]
+        if not out["physics"]:
+            del out["physics"]
         return out
 
 
@@ -304,6 +313,12 @@ def _validate(cfg: GridConfig) -> None:
                 'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
                 f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
             )
+    if not isinstance(cfg.physics, dict):
+        raise _fail("physics", cfg.physics, f"allowed: a table of {', '.join(PHYSICS_KEYS)}")
+    try:
+        Physics.of(cfg.physics)
+    except (TypeError, ValueError) as exc:
+        raise _fail("physics", cfg.physics, str(exc)) from None
     _check_choices(cfg, "mode", MODES, many=False)
     _check_choices(cfg, "target", TARGETS, many=False)
     for key in ("experiment", "tracking_uri", "work_dir"):

@@ -84,6 +84,7 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
             checkpoint_every=cfg.checkpoint_every,
             max_seconds=cfg.max_seconds,
             options=dict(cfg.options.get(cell.approach, {})),
+            physics=dict(cfg.physics),
         )
         try:
             if cell.fitness == WALKING_FITNESS:

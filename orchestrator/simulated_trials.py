@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 from linkevo.hardware.field_trial import PHYSICS, log_field_trial
 from linkevo.sim.leg import LegError, leg_from_genome
 from linkevo.sim.linkage_doc import DocumentError, from_document
-from linkevo.sim.robot import LEG_SLOTS, floor
+from linkevo.sim.robot import LEG_SLOTS
 from linkevo.sim.walk_figures import summary
 from linkevo.sim.walking import Walk, WalkSettings, field_trials
 from linkevo.workers.store.artifacts import read_document
@@ -95,7 +95,7 @@ def simulate_source(
     and no walks."""
     genome, mode = from_document(source.document)
     gait, offsets = gait_of(config)
-    where = floor(floor_name)
+    where = config.physics.floor(floor_name)
     try:
         leg = leg_from_genome(genome, mode)
     except LegError as exc:
@@ -119,6 +119,7 @@ def simulate_source(
         gait=gait,
         offsets_deg=offsets,
         settings=WalkSettings(seconds=seconds, model=model),
+        physics=config.physics,
     )
     result = summary(walks, where, seconds)
     result["model"] = model

@@ -11,6 +11,7 @@ interruption walks only what is missing (and what failed).
 
 from __future__ import annotations
 
+import json
 import math
 import tempfile
 import time
@@ -25,6 +26,7 @@ import pandas as pd
 from linkevo.sim import decode, simulate
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.physical import physical_checks
+from linkevo.sim.robot import Physics
 from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_map_frame
 from linkevo.sim.walk_map import walk_rows as _walk_rows
 from linkevo.workers.store import run_layout as layout
@@ -119,11 +121,11 @@ Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
 
 
 def walk_rows(
-    run: Runner, batches: list[CellBatch], seconds: float
+    run: Runner, batches: list[CellBatch], seconds: float, physics: Physics | None = None
 ) -> Iterator[tuple[int, list[dict]]]:
     """`sim.walk_map.walk_rows` in tasks of `BATCH_LEGS` distinct legs: yields, as each
     task ends, how many cells it built and the rows it settled."""
-    return _walk_rows(run, batches, seconds, BATCH_LEGS)
+    return _walk_rows(run, batches, seconds, BATCH_LEGS, physics)
 
 
 def run_in_process(work: Callable[[Any], Any], items: list) -> Iterator[Any]:
@@ -163,11 +165,18 @@ def run_on_ray(work: Callable[[Any], Any], items: list, in_flight: int) -> Itera
         yield ray.get(ready[0])
 
 
-def check_before_walking(store: RunStore, trial: TrialRun, resume: bool, restart: bool) -> None:
+def check_before_walking(
+    store: RunStore,
+    trial: TrialRun,
+    resume: bool,
+    restart: bool,
+    physics: Physics | None = None,
+) -> None:
     """Refuses a walk map that cannot be made as asked, before anything is walked: another
     process is making it, the run has one and neither `resume` nor `restart` is on (so
-    nothing is overwritten unasked), or what it would read is missing or damaged (the
-    repertoire; resuming, the walk map).
+    nothing is overwritten unasked), resuming would walk another robot than the map's
+    (`physics`, against the run's `WALK_MAP_PHYSICS` tag), or what it would read is
+    missing or damaged (the repertoire; resuming, the walk map).
 
     Raises:
         Busy: another process holds the run's walk-map lease.
@@ -185,10 +194,25 @@ def check_before_walking(store: RunStore, trial: TrialRun, resume: bool, restart
             f"run {trial.run_id} ({trial.trial_key}) already has a walk map; add --resume "
             "to walk only the cells it lacks, or --restart to walk the map anew"
         )
+    if resume and layout.WALK_MAP in names:
+        had = store.client.get_run(trial.run_id).data.tags.get(layout.WALK_MAP_PHYSICS, "{}")
+        wanted = physics_tag(physics or Physics())
+        if json.loads(had) != json.loads(wanted):
+            raise WalkMapError(
+                f"run {trial.run_id} ({trial.trial_key}): its walk map walked a robot with "
+                f"physics {had}, this one has {wanted}; resume with the map's robot config, "
+                "or --restart to walk the map anew on this robot"
+            )
     with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
         store.repertoire(trial.run_id, Path(tmp) / "in")
         if resume:
             store.walk_map(trial.run_id, Path(tmp) / "done")
+
+
+def physics_tag(physics: Physics) -> str:
+    """Returns the `WALK_MAP_PHYSICS` tag of a robot: its parameters that differ from the
+    study's, as JSON ("{}" for the study's robot)."""
+    return json.dumps(physics.changed(), sort_keys=True)
 
 
 @dataclass(frozen=True)
@@ -210,6 +234,7 @@ def walk_map(
     resume: bool = False,
     restart: bool = False,
     seconds: float,
+    physics: Physics | None = None,
     tick: Callable[[str, int, int], None] | None = None,
 ) -> WalkMapResult:
     """Walks one repertoire trial's chosen cells and logs its walk map; returns it.
@@ -223,6 +248,7 @@ def walk_map(
         resume: complete the map the run already has; a complete map is returned as it
             is, nothing logged.
         restart: walk the map anew, replacing the run's (a damaged one, say).
+        physics: the robot's parameters (default: the study's robot); tagged on the run.
         tick: called as tasks end with ("building legs", cells built, cells), then with
             ("walking", pairs done, pairs); a (cell, floor) pair is done when its row is
             known (a cell that is not walked, as it is built).
@@ -234,7 +260,9 @@ def walk_map(
     """
     from linkevo.orchestrator.lease import Lease, Subject
 
-    check_before_walking(store, trial, resume, restart)
+    physics = physics or Physics()
+    check_before_walking(store, trial, resume, restart, physics)
+    store.client.set_tag(trial.run_id, layout.WALK_MAP_PHYSICS, physics_tag(physics))
     subject = Subject.walk_map(trial.run_id, trial.trial_key)
     lease = Lease.take(store.client, store.uri, store.experiment_id, subject)
     try:
@@ -254,7 +282,7 @@ def walk_map(
             cells, built = sum(len(b.cells) for b in batches), 0
             last = time.monotonic()
             try:
-                for n_built, new_rows in walk_rows(run, batches, seconds):
+                for n_built, new_rows in walk_rows(run, batches, seconds, physics):
                     rows += new_rows
                     built += n_built
                     if tick is not None and built < cells:

@@ -27,6 +27,17 @@ def limits(
     return {"low": low, "high": high, "open_high": open_high}
 
 
+def range_error(key: str, value: float, meta: dict) -> str | None:
+    """Returns what is wrong with `value` against a field's `limits` ("KEY = VALUE is out
+    of range [LOW, HIGH]"), or None when it is within them."""
+    low, high = meta.get("low"), meta.get("high")
+    too_high = high is not None and (value >= high if meta["open_high"] else value > high)
+    if (low is not None and value < low) or too_high:
+        bracket = ")" if meta.get("open_high") else "]"
+        return f"{key} = {value!r} is out of range [{low}, {high}{bracket}"
+    return None
+
+
 @dataclass(frozen=True)
 class GaitConfig:
     """Clock rate, leg speed and the PID on the wrapped phase error (`[gait]` of the robot

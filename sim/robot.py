@@ -8,10 +8,13 @@ the reasoning of each. Lengths are in metres unless a name says otherwise.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+
+from linkevo.sim.gait import limits, range_error
 
 ROBOT_MODELS: tuple[str, ...] = ("lean", "full")
 """The MuJoCo models of the robot a walk can run on (`sim.walking.MODELS`): lean, the
@@ -162,3 +165,93 @@ def floor(name: str) -> Floor:
     if name not in FLOORS:
         raise ValueError(f"floor {name!r}: allowed {', '.join(FLOORS)}")
     return FLOORS[name]
+
+
+@dataclass(frozen=True)
+class Physics:
+    """The simulated robot's physical parameters a builder may know better than linkevo
+    (`[physics]` of the robot config, `hardware.config`): the frame, the motor and the
+    floors. The defaults are the study's robot as estimated (`Frame`, `Motor`, `FLOORS`;
+    `docs/walking.md`); `linkevo hexapod calibrate` fits chosen ones to a robot's own
+    field trials. Lengths in metres, masses in kg; a floor's `*_contact_s` is the time
+    constant of its contact's softness (MuJoCo's solref; larger: feet sink further)."""
+
+    frame_mass_kg: float = field(default=Frame.mass_kg, metadata=limits(0.1, 20.0))
+    frame_length_m: float = field(default=Frame.length, metadata=limits(0.1, 2.0))
+    frame_width_m: float = field(default=Frame.width, metadata=limits(0.02, 1.0))
+    frame_height_m: float = field(default=Frame.height, metadata=limits(0.01, 0.5))
+    leg_spacing_m: float = field(default=Frame.leg_spacing, metadata=limits(0.02, 1.0))
+    motor_stall_nm: float = field(default=Motor.stall_nm, metadata=limits(0.1, 20.0))
+    motor_no_load_rpm: float = field(default=Motor.no_load_rpm, metadata=limits(1.0, 600.0))
+    motor_loop_gain: float = field(default=Motor.loop_gain, metadata=limits(0.0, 100.0))
+    flat_friction: float = field(default=0.35, metadata=limits(0.01, 3.0))
+    carpet_friction: float = field(default=0.9, metadata=limits(0.01, 3.0))
+    flat_contact_s: float = field(default=0.004, metadata=limits(0.0005, 0.2))
+    carpet_contact_s: float = field(default=0.02, metadata=limits(0.0005, 0.2))
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"physics {f.name} = {value!r}: allowed a number")
+            wrong = range_error(f.name, float(value), f.metadata)
+            if wrong:
+                raise ValueError(f"physics {wrong}")
+
+    @classmethod
+    def of(cls, values: dict) -> Physics:
+        """Returns the robot with `values` (names from `PHYSICS_KEYS`) changed from the
+        study's.
+
+        Raises:
+            ValueError: naming an unknown key or a value out of its range.
+        """
+        unknown = sorted(set(values) - set(PHYSICS_KEYS))
+        if unknown:
+            raise ValueError(f"physics: unknown key(s) {unknown}; allowed: {list(PHYSICS_KEYS)}")
+        return cls(**values)
+
+    def frame(self) -> Frame:
+        """Returns the chassis these parameters describe."""
+        return dataclasses.replace(
+            Frame(),
+            mass_kg=self.frame_mass_kg,
+            length=self.frame_length_m,
+            width=self.frame_width_m,
+            height=self.frame_height_m,
+            leg_spacing=self.leg_spacing_m,
+        )
+
+    def motor(self) -> Motor:
+        """Returns the motor these parameters describe."""
+        return dataclasses.replace(
+            Motor(),
+            stall_nm=self.motor_stall_nm,
+            no_load_rpm=self.motor_no_load_rpm,
+            loop_gain=self.motor_loop_gain,
+        )
+
+    def floor(self, name: str) -> Floor:
+        """Returns the named floor with these parameters' friction and softness.
+
+        Raises:
+            ValueError: naming the floor and the ones there are.
+        """
+        base = floor(name)
+        friction = getattr(self, f"{name}_friction")
+        softness = getattr(self, f"{name}_contact_s")
+        return dataclasses.replace(base, friction=friction, solref=(softness, base.solref[1]))
+
+    def changed(self) -> dict[str, float]:
+        """Returns the parameters that differ from the defaults (what identifies a robot
+        other than the study's)."""
+        default = Physics()
+        return {
+            f.name: getattr(self, f.name)
+            for f in dataclasses.fields(self)
+            if getattr(self, f.name) != getattr(default, f.name)
+        }
+
+
+PHYSICS_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Physics))
+"""The names `[physics]`, `--params` and a grid's `physics` table accept."""

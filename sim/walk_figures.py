@@ -147,8 +147,18 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "foot_deviation_max_mm": rounded(worst(w.foot_deviation_mm for w in walks), 3),
         "timestep_ms": [round(w.timestep * 1000, 3) for w in walks],
         "frame_contact_share": rounded(worst(w.frame_contact for w in walks), 3),
+        "frailty": frailest(walks),
         "caveats": caveats(walks),
     }  # fmt: skip
+
+
+def frailest(walks: list[Walk]) -> dict | None:
+    """Returns the frailty figures (`sim.frailty.Frailty.as_dict`) of the walk whose leg
+    gives most, or None when no walk has them (a walk that diverged)."""
+    found = [w.frailty for w in walks if w.frailty is not None]
+    if not found:
+        return None
+    return max(found, key=lambda f: (f.foot_deflection_mm, f.pin_moment_nmm)).as_dict()
 
 
 def caveats(walks: list[Walk]) -> list[str]:

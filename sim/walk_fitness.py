@@ -44,7 +44,7 @@ import numpy as np
 
 from linkevo.sim.leg import LegError, recipe_and_leg
 from linkevo.sim.physical import BUILDABLE_STRETCH, PhysicalChecks
-from linkevo.sim.robot import FLOORS, WALK_SECONDS
+from linkevo.sim.robot import FLOORS, WALK_SECONDS, Physics
 from linkevo.sim.walk_map import error_text, map_row, walk_map_settings, walked_row
 from linkevo.sim.walking import WalkSettings, walk
 
@@ -107,6 +107,7 @@ def walk_candidate(
     known: Container[str] = (),
     bar: float = math.inf,
     seconds: float = SEARCH_SECONDS,
+    physics: Physics | None = None,
 ) -> CandidateWalk:
     """Builds a candidate's LEGO leg and walks it: carpet, then flat unless it broke there
     or its carpet loss alone is at or above `bar`.
@@ -120,6 +121,7 @@ def walk_candidate(
             (`algorithms.Optimizer.bar`): F_w is the worse floor's loss, so once the first
             floor's is at or above it the second cannot matter and is not walked.
         seconds: each walk's length.
+        physics: the robot's parameters (default: the study's robot).
     """
     start = time.perf_counter()
     base = {"cell": -1, "seconds": float(seconds)}
@@ -153,7 +155,7 @@ def walk_candidate(
             rows.append(map_row(base, floor, "not walked", reason=reason, leg="LEGO build"))
             continue
         try:
-            w = walk(leg, FLOORS[floor], settings=settings)
+            w = walk(leg, FLOORS[floor], settings=settings, physics=physics)
         except Exception as exc:  # recorded per candidate, the batch goes on
             failed = [map_row(base, f, "failed", reason=error_text(exc)) for f in WALK_ORDER]
             return done("failed", recipe.key, failed)

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from linkevo.sim.leg import LegError, LegRecipe, leg_recipe
-from linkevo.sim.robot import FLOORS, WALK_SECONDS
+from linkevo.sim.robot import FLOORS, WALK_SECONDS, Physics
 from linkevo.sim.walking import Walk, WalkSettings, walk
 
 WALK_MAP_STEP_S = 0.004
@@ -82,6 +82,7 @@ class LegBatch:
     recipes: dict[str, LegRecipe]
     floors: tuple[str, ...]
     seconds: float = WALK_SECONDS
+    physics: Physics = field(default_factory=Physics)
 
 
 def walk_map_settings(seconds: float = WALK_SECONDS) -> WalkSettings:
@@ -135,7 +136,7 @@ def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
         rows = []
         for floor in batch.floors:
             try:
-                w = walk(leg, FLOORS[floor], settings=settings)
+                w = walk(leg, FLOORS[floor], settings=settings, physics=batch.physics)
             except Exception as exc:  # recorded per leg and floor
                 rows.append(map_row(base, floor, "failed", reason=error_text(exc), leg=kind))
                 continue
@@ -169,9 +170,12 @@ def rows_for_cells(rows: list[dict], cells: list[int]) -> list[dict]:
     return [{**row, "cell": int(cell)} for cell in cells for row in rows]
 
 
-def leg_batches(legs: list[LegToWalk], seconds: float, per_task: int) -> list[LegBatch]:
+def leg_batches(
+    legs: list[LegToWalk], seconds: float, per_task: int, physics: Physics
+) -> list[LegBatch]:
     """Returns the walk tasks of distinct legs (`group_legs`), `per_task` legs on the same
-    floors each; a leg is named by its index in `legs`."""
+    floors each, walked on the robot `physics` describes; a leg is named by its index in
+    `legs`."""
     by_floors: dict[tuple[str, ...], list[int]] = {}
     for i, leg in enumerate(legs):
         by_floors.setdefault(leg.floors, []).append(i)
@@ -179,7 +183,7 @@ def leg_batches(legs: list[LegToWalk], seconds: float, per_task: int) -> list[Le
     for floors, index in by_floors.items():
         for start in range(0, len(index), per_task):
             named = {str(i): legs[i].recipe for i in index[start : start + per_task]}
-            out.append(LegBatch(named, floors, seconds))
+            out.append(LegBatch(named, floors, seconds, physics))
     return out
 
 
@@ -188,6 +192,7 @@ def walk_rows(
     batches: list[CellBatch],
     seconds: float,
     legs_per_task: int,
+    physics: Physics | None = None,
 ) -> Iterator[tuple[int, list[dict]]]:
     """Yields, as each task ends, how many cells it built and the rows it settled: while
     the legs are built, the rows of the cells that are not walked; then each distinct
@@ -199,25 +204,24 @@ def walk_rows(
         batches: the cells.
         seconds: each walk's length.
         legs_per_task: distinct legs per walk task.
+        physics: the robot's parameters (default: the study's robot).
     """
     built = []
     for cells in run(build_cells, batches):
         yield len(cells), [r for b in cells for r in b.rows]
         built += [b for b in cells if b.recipe is not None]
     legs = group_legs(built)
-    for walked in run(walk_legs, leg_batches(legs, seconds, legs_per_task)):
+    tasks = leg_batches(legs, seconds, legs_per_task, physics or Physics())
+    for walked in run(walk_legs, tasks):
         for name, leg_rows in walked.items():
             yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
 
 
-def walk_cells(batch: CellBatch) -> list[dict]:
+def walk_cells(batch: CellBatch, physics: Physics | None = None) -> list[dict]:
     """Returns a row (`COLUMNS`) per cell and floor of the batch, walked in this process
-    (`walk_rows` with every leg in one task)."""
-    rows = [
-        r
-        for _, part in walk_rows(map, [batch], batch.seconds, max(1, len(batch.cells)))
-        for r in part
-    ]
+    (`walk_rows` with every leg in one task) on the robot `physics` describes."""
+    legs = max(1, len(batch.cells))
+    rows = [r for _, part in walk_rows(map, [batch], batch.seconds, legs, physics) for r in part]
     cell_order = {int(c): i for i, c in enumerate(batch.cells)}
     return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
+from linkevo.sim.frailty import Frailty, judge_frailty
 from linkevo.sim.full_model import TIMESTEP_S, build_robot
 from linkevo.sim.gait import GaitConfig, PhasePid
 from linkevo.sim.lean_model import LEAN_TIMESTEP_S, build_lean_robot
@@ -31,6 +32,7 @@ from linkevo.sim.robot import (
     Floor,
     Frame,
     Motor,
+    Physics,
 )
 from linkevo.sim.robot_model import RobotModel, control_tick, quiet_engine
 from linkevo.sim.walk_figures import break_reason, foot_slip, wrap_angle, yaw_of
@@ -114,6 +116,8 @@ class Walk:
             its crank's angle (`RobotModel.foot_deviation`): the pins' play along the leg.
         stopped_s: where a walk with `stop_at_break` ended because it had broken (seconds
             after the clock started), NaN when it ran its length.
+        frailty: how far the real LEGO leg would give under the walk's loads
+            (`sim.frailty`; the frailest of the walked legs); a frail leg breaks the walk.
         trace: per control tick: "t" (T,), "body" (T, 3) frame position, "contact"
             (T, 6) bool each leg touching the floor, "phase" (T, 6) radians, "qpos"
             (T, nq) the whole state's positions (to replay the walk).
@@ -143,6 +147,7 @@ class Walk:
     model: mujoco.MjModel | None = field(default=None, repr=False)
     foot_deviation_mm: float = math.nan
     stopped_s: float = math.nan
+    frailty: Frailty | None = None
 
 
 def walk(
@@ -155,6 +160,7 @@ def walk(
     seed: int | None = None,
     frame: Frame | None = None,
     motor: Motor | None = None,
+    physics: Physics | None = None,
 ) -> Walk:
     """Walks the robot once and returns what happened.
 
@@ -166,7 +172,11 @@ def walk(
         settings: length, steps, direction.
         seed: the start's perturbation; None starts exactly at the offsets.
         frame, motor: the chassis and motor (defaults: the study's robot).
+        physics: a robot's own parameters (`sim.robot.Physics`): its floor, frame and
+            motor replace `floor`'s contact, `frame` and `motor`.
     """
+    if physics is not None:
+        floor, frame, motor = physics.floor(floor.name), physics.frame(), physics.motor()
     gait = gait or GaitConfig()
     settings = settings or WalkSettings()
     if settings.model not in MODELS:
@@ -195,7 +205,7 @@ def walk(
             result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
         finer = settings.step / 2
         if not result.diverged or finer < MIN_TIMESTEP_S - 1e-12:
-            return result
+            return judge_frailty(result, legs, frame or Frame())
         # A stiff linkage can blow up at the default step: walk it again at half the step.
         settings = dataclasses.replace(settings, timestep=finer)
 

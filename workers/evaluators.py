@@ -10,6 +10,7 @@ import numpy as np
 from linkevo.sim.evaluating import evaluate
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.fitness import N_OBJECTIVES
+from linkevo.sim.robot import Physics
 from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.result_pool import ResultPool
 from linkevo.workers.trial_spec import resolve_target
@@ -99,7 +100,12 @@ def make_evaluator(
             walkers = ActorWalkers.start(actors, cpus_per_actor, placement_group)
         two = spec.eval_fitness != spec.fitness
         return WalkingEvaluator(
-            spec.mode, spec.n_angles, two_objective=two, walkers=walkers, surrogate=spec.surrogate
+            spec.mode,
+            spec.n_angles,
+            two_objective=two,
+            walkers=walkers,
+            surrogate=spec.surrogate,
+            physics=Physics.of(spec.physics),
         )
     if not actors:
         return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)

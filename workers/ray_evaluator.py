@@ -17,6 +17,7 @@ from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import validate_genomes
+from linkevo.sim.robot import Physics
 from linkevo.sim.walk_fitness import CandidateWalk, walk_candidate
 from linkevo.workers.evaluators import Bar, LocalEvaluator, Pending, Stateless
 
@@ -168,12 +169,12 @@ class WalkWorker:
     """Builds and walks a walking trial's candidates; runs as a Ray actor."""
 
     def walk(
-        self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float
+        self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float, physics: Physics
     ) -> tuple[CandidateWalk, str]:
         """Returns the candidate's walk (`sim.walk_fitness.walk_candidate`) and this
         actor's Ray node."""
         node = ray.get_runtime_context().get_node_id()
-        return walk_candidate(genome, mode, known, bar), node
+        return walk_candidate(genome, mode, known, bar, physics=physics), node
 
 
 class ActorWalkers:
@@ -197,14 +198,16 @@ class ActorWalkers:
         options = actor_options(WalkWorker, n_actors, cpus_per_actor, placement_group)
         return cls([o.remote() for o in options])
 
-    def walk(self, genomes: np.ndarray, mode: str, known: frozenset[str], bars: np.ndarray):
+    def walk(self, genomes, mode, known, bars, physics):
         """Starts every candidate's walk now; yields each (walk, node) in order."""
         from ray.util import ActorPool
 
         known_ref = ray.put(known)
         pool = ActorPool(self._actors)
         items = list(zip(genomes, bars.tolist(), strict=True))
-        return pool.map(lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1]), items)
+        return pool.map(
+            lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1], physics), items
+        )
 
     def close(self) -> None:
         """Kills the actors (idempotent)."""

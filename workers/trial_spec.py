@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.errors import LinkevoError
+from linkevo.sim.robot import Physics
 from linkevo.sim.study import (
     APPROACHES,
     CANDIDATES_PER_WALK,
@@ -71,6 +72,8 @@ class TrialSpec:
         surrogate: a walking MAP-Elites trial walks only the candidates the learned walk
             model, fitted on its walks as it goes, predicts could enter or improve its
             archive (`workers.walk_surrogate`).
+        physics: the simulated robot's parameters that differ from the study's robot
+            (`sim.robot.Physics`), for every walk of the trial (F_w's, `walk_rerank`'s).
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -91,6 +94,7 @@ class TrialSpec:
     walks: int = 0
     seed_from: str = ""
     surrogate: bool = False
+    physics: dict = field(default_factory=dict)
 
     @classmethod
     def walking(cls, approach: str, walks: int, **settings: object) -> TrialSpec:
@@ -145,6 +149,12 @@ class TrialSpec:
                 f"surrogate = true is for walking trials of a MAP-Elites approach "
                 f"({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
             )
+        if not isinstance(self.physics, dict):
+            fail(f"physics must be a table of numbers, got {self.physics!r}")
+        try:
+            Physics.of(self.physics)
+        except (TypeError, ValueError) as exc:
+            fail(str(exc))
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
             fail(f"checkpoint_every must be a positive integer, got {self.checkpoint_every!r}")
         if self.max_seconds is not None and not (

@@ -13,7 +13,7 @@ import pandas as pd
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage_doc import to_document
 from linkevo.sim.physical import physical_checks
-from linkevo.sim.robot import FLAT
+from linkevo.sim.robot import FLAT, Physics
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.run_layout import (
     BEST_WALKER,
@@ -47,7 +47,8 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
     order = np.lexsort((cells, loss))
     keep = order[physical_checks(batch, simulate(batch, spec.n_angles)).buildable[order]]
     keep = keep[: spec.walk_rerank]
-    rows = walk_cells(CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,)))
+    batch = CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,))
+    rows = walk_cells(batch, Physics.of(spec.physics))
     distance = np.array([r["mean_distance_cm"] for r in rows], dtype=float)
     sound = np.array([r["status"] == "walked" and not r["breaks"] for r in rows], dtype=bool)
     columns = {c: np.array([r[c] for r in rows]) for c in COLUMNS}

@@ -25,6 +25,7 @@ from linkevo.sim.evaluating import evaluate
 from linkevo.sim.evaluation import Evaluation
 from linkevo.sim.genome import validate_genomes
 from linkevo.sim.physical import physical_checks
+from linkevo.sim.robot import Physics
 from linkevo.sim.walk_fitness import (
     CandidateWalk,
     floor_losses,
@@ -40,10 +41,16 @@ class Walkers(Protocol):
     """Where a batch's candidates are built and walked."""
 
     def walk(
-        self, genomes: np.ndarray, mode: str, known: frozenset[str], bars: np.ndarray
+        self,
+        genomes: np.ndarray,
+        mode: str,
+        known: frozenset[str],
+        bars: np.ndarray,
+        physics: Physics,
     ) -> Iterator[tuple[CandidateWalk, str]]:
         """Yields each candidate's walk (`sim.walk_fitness.walk_candidate`, legs in
-        `known` not walked, each with its bar (K,)) and where it ran, in order."""
+        `known` not walked, each with its bar (K,), on the robot `physics` describes) and
+        where it ran, in order."""
         ...
 
     def close(self) -> None:
@@ -54,10 +61,10 @@ class Walkers(Protocol):
 class LocalWalkers:
     """Builds and walks every candidate in this process, one after another."""
 
-    def walk(self, genomes: np.ndarray, mode: str, known: frozenset[str], bars: np.ndarray):
+    def walk(self, genomes, mode, known, bars, physics):
         host = socket.gethostname()
         for genome, bar in zip(genomes, bars, strict=True):
-            yield walk_candidate(genome, mode, known, float(bar)), host
+            yield walk_candidate(genome, mode, known, float(bar), physics=physics), host
 
     def close(self) -> None:
         """Nothing to release."""
@@ -71,6 +78,7 @@ class WalkingEvaluator:
         n_angles: crank angles of the 2-D evaluation.
         two_objective: return each floor's loss (B, 2) rather than the worse one (B,).
         walkers: where candidates are walked (`LocalWalkers`, `ActorWalkers`).
+        physics: the robot's parameters (default: the study's robot).
         surrogate: pre-screen the candidates with the learned walk model fitted on the
             trial's walks (`workers.walk_surrogate`); single-objective only.
     """
@@ -82,8 +90,10 @@ class WalkingEvaluator:
         two_objective: bool,
         walkers: Walkers | None = None,
         surrogate: bool = False,
+        physics: Physics | None = None,
     ) -> None:
         self.mode = mode
+        self.physics = physics or Physics()
         self.n_angles = n_angles
         self.two_objective = two_objective
         self.walkers = walkers or LocalWalkers()
@@ -136,7 +146,9 @@ class WalkingEvaluator:
             worth = self.surrogate.worth_walking(genomes[built], bars[built])
             built, skipped = built[worth], built[~worth]
         known = self.log.known()
-        walks = self.walkers.walk(genomes[built], self.mode, frozenset(known), bars[built])
+        walks = self.walkers.walk(
+            genomes[built], self.mode, frozenset(known), bars[built], self.physics
+        )
 
         def collect() -> Evaluation:
             self._in_flight = None

@@ -20,8 +20,8 @@ if TYPE_CHECKING:
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Adds the `hexapod` subcommand group (walk, trial, simulate, study, table)."""
-    from linkevo.orchestrator.commands import hexapod_simulate
+    """Adds the `hexapod` subcommand group (walk, trial, simulate, study, calibrate, table)."""
+    from linkevo.orchestrator.commands import hexapod_calibrate, hexapod_simulate
 
     parser = subparsers.add_parser(
         "hexapod",
@@ -32,6 +32,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _register_walk(sub)
     _register_trial(sub)
     hexapod_simulate.register(sub)
+    hexapod_calibrate.register(sub)
     _register_table(sub)
 
 

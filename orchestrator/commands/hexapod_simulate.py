@@ -52,17 +52,45 @@ def register(sub: argparse._SubParsersAction) -> None:
         "study",
         help="repeat the study's prototyping (Table I) on the simulated robot for a grid",
         description=(
-            "For each MAP-Elites approach with F_p: the first robot (the best linkage of the "
-            "approach's best trial) and a modified robot chosen from its 5 × 5 downsampled "
-            "map, each walked on both floors in 3-D physics and logged as simulated field "
-            "trials (docs/walking.md)."
+            "By the paper's protocol, for each MAP-Elites approach with F_p and each of K "
+            "trials drawn by a seed: the first robot (the drawn trial's best linkage) and a "
+            "modified robot from its 5 × 5 downsampled map (the neighbouring region nearest "
+            "the first's path with the change the paper's builders sought), each walked on "
+            "both floors on both robot models and logged as simulated field trials; then the "
+            "paper's prototyping claims judged over the draws (docs/results.md)."
         ),
     )
     study.add_argument("grid_id", help="the grid (its id, as `linkevo report` shows it)")
+    study.add_argument(
+        "--trials-drawn",
+        type=options.count(1, 1000),
+        default=5,
+        help="trials drawn per approach (the paper drew 1; verdicts need several)",
+    )
+    study.add_argument(
+        "--draw-seed", type=options.count(0, 2**31), default=0, help="seeds the draw"
+    )
+    study.add_argument(
+        "--first",
+        choices=("drawn", "best"),
+        default="drawn",
+        help="drawn: the drawn trials' best linkages; best: the approach's best trial only",
+    )
+    study.add_argument(
+        "--modified",
+        choices=("sought", "walked"),
+        default="sought",
+        help="sought: the nearest neighbouring path with the builders' change (no walk); "
+        "walked: the neighbour that walks furthest on flat",
+    )
     options.seconds(study)
-    options.repeats(study, "walks per robot and floor")
-    study.add_argument("--out", type=Path, default=None, help="write the table here as CSV")
-    options.robot_model(study)
+    options.repeats(study, "walks per robot, floor and model")
+    study.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="write table1_predicted.csv and table1_verdicts.csv into this folder",
+    )
     options.robot_config(study)
     options.store(study)
     study.set_defaults(func=study_handler)
@@ -148,6 +176,13 @@ def _simulation_text(source, robot: str, result: dict) -> str:
             f"{result['pin_force_p99_n']} N; loop closure within {result['loop_error_max_mm']} "
             f"mm, feet within {result['foot_deviation_max_mm']} mm of their path"
         )
+    frail = result.get("frailty")
+    if frail:
+        lines.append(
+            f"  frailty: the foot gives {frail['foot_deflection_mm']} mm under the robot's "
+            f"weight (splay {frail['splay_mm']}, sag {frail['sag_mm']}); pins levered out of "
+            f"the plane by up to {frail['pin_moment_nmm']} N·mm"
+        )
     for caveat in result.get("caveats", []):
         lines.append(f"  caveat: {caveat}")
     verdict = f"BREAKS: {result['reason']}" if result["breaks"] else "walks"
@@ -158,13 +193,15 @@ def _simulation_text(source, robot: str, result: dict) -> str:
 
 
 def study_handler(args: argparse.Namespace) -> int:
-    """Predicts the study's Table I for a grid and prints it (and writes it with --out)."""
+    """Predicts the study's Table I for a grid, judges the prototyping claims and prints
+    them (and writes both tables with --out)."""
+    from linkevo.orchestrator.table_one_verdicts import WALK_CM, judge_prototyping
     from linkevo.orchestrator.walk_study import predict_table_one
     from linkevo.workers.store.artifacts import write_text_atomic
     from linkevo.workers.store.runs import RunStore
 
-    if args.out is not None and args.out.suffix != ".csv":
-        raise CliError(f"--out {args.out}: allowed a .csv file")
+    if args.out is not None and args.out.exists() and not args.out.is_dir():
+        raise CliError(f"--out {args.out}: allowed a folder (it is a file)")
     config = load_robot(args)
     table = predict_table_one(
         RunStore.open(args.tracking_uri, args.experiment),
@@ -172,9 +209,20 @@ def study_handler(args: argparse.Namespace) -> int:
         config=config,
         seconds=args.seconds,
         repeats=args.repeats,
-        model=args.model,
+        trials_drawn=args.trials_drawn,
+        draw_seed=args.draw_seed,
+        first=args.first,
+        modified=args.modified,
     )
+    verdicts = judge_prototyping(table)
+    print(f"\nThe prototyping claims (walks: no break and more than {WALK_CM:g} cm forward):")
+    for row in verdicts.itertuples():
+        print(f"  {row.claim} ({row.where})")
+        print(f"    lean [{row.verdict_lean}] {row.evidence_lean}")
+        print(f"    full [{row.verdict_full}] {row.evidence_full}")
     if args.out is not None:
-        write_text_atomic(args.out, table.to_csv(index=False))
-        print(f"table: {args.out}")
+        args.out.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(args.out / "table1_predicted.csv", table.to_csv(index=False))
+        write_text_atomic(args.out / "table1_verdicts.csv", verdicts.to_csv(index=False))
+        print(f"tables: {args.out}/table1_predicted.csv, table1_verdicts.csv")
     return 0

@@ -59,6 +59,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "model (fitted on the trial's walks as it goes) predicts could enter the archive",
     )
     parser.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        help="robot TOML whose [physics] the walks of an Fw trial use ("
+        "default: the study's robot, as the shipped configs/hexapod.toml)",
+    )
+    parser.add_argument(
         "--batch-size",
         type=int,
         default=None,
@@ -165,6 +172,10 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
         max_seconds=args.max_seconds,
         options=parse_options(args.option),
     )
+    if args.config is not None:
+        from linkevo.orchestrator.commands.hexapod import load_robot
+
+        settings["physics"] = load_robot(args).physics.changed()
     if args.batch_size is not None:
         settings["batch_size"] = args.batch_size
     try:

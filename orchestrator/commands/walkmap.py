@@ -8,6 +8,7 @@ import signal
 import sys
 
 from linkevo.orchestrator.commands import options
+from linkevo.orchestrator.commands.hexapod import load_robot
 from linkevo.sim.robot import FLOORS
 from linkevo.workers.store import run_layout as layout
 
@@ -51,6 +52,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="walk the map anew, replacing the one the run has (a damaged one, say)",
     )
+    options.robot_config(parser)
     options.ray_address(parser)
     options.store(parser)
     parser.set_defaults(func=handle)
@@ -65,10 +67,11 @@ def handle(args: argparse.Namespace) -> int:
 
     selection = Selection.parse(args.cells)
     floors = tuple(FLOORS) if args.floor == BOTH else (args.floor,)
+    physics = load_robot(args).physics
     store = RunStore.open(args.tracking_uri, args.experiment)
     trials = store.repertoires(args.ref).trials
     for trial in trials:  # before Ray starts or anything is walked
-        check_before_walking(store, trial, args.resume, args.restart)
+        check_before_walking(store, trial, args.resume, args.restart, physics)
 
     import ray
 
@@ -104,6 +107,7 @@ def handle(args: argparse.Namespace) -> int:
                     resume=args.resume,
                     restart=args.restart,
                     seconds=args.seconds,
+                    physics=physics,
                     tick=tick,
                 )
             except KeyboardInterrupt:
@@ -139,6 +143,7 @@ def _resume_command(args: argparse.Namespace) -> str:
         ("--floor", args.floor, BOTH),
         ("--cells", args.cells, "buildable"),
         ("--seconds", args.seconds, options.WALK_SECONDS),
+        ("--config", args.config, None),
         ("--address", args.address, None),
         ("--experiment", args.experiment, options.DEFAULT_EXPERIMENT),
         ("--tracking-uri", args.tracking_uri, None),

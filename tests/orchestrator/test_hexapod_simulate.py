@@ -152,22 +152,87 @@ def test_simulate_refuses_a_file_that_is_not_a_linkage(tmp_path, capsys):
 
 def test_study_predicts_first_and_modified_robots_from_the_5x5_map(store, tmp_path, capsys):
     uri, run_id, _ = store
-    out = tmp_path / "table1.csv"
+    out = tmp_path / "study"
     code = main(
-        ["hexapod", "study", GRID, "--seconds", "1", "--repeats", "1", "--out", str(out),
-         "--tracking-uri", uri]
+        ["hexapod", "study", GRID, "--trials-drawn", "1", "--seconds", "1", "--repeats", "1",
+         "--out", str(out), "--tracking-uri", uri]
     )  # fmt: skip
     assert code == 0
-    rows = list(csv.DictReader(out.open()))
-    assert [(r["approach"], r["robot"], r["floor"]) for r in rows] == [
-        ("MAP-LIS", "first", "flat"),
-        ("MAP-LIS", "first", "carpet"),
-        ("MAP-LIS", "modified", "flat"),
-        ("MAP-LIS", "modified", "carpet"),
+    rows = list(csv.DictReader((out / "table1_predicted.csv").open()))
+    assert [(r["approach"], r["draw"], r["robot"], r["floor"], r["model"]) for r in rows] == [
+        ("MAP-LIS", "0", robot, floor, model)
+        for robot in ("first", "modified")
+        for floor in ("flat", "carpet")
+        for model in ("lean", "full")
     ]
-    first, modified = rows[0], rows[2]
+    first, modified = rows[0], rows[4]
     assert first["region"] == "2,2" and first["cell"] == "best"
     assert modified["region"] in ("2,3", "3,3")  # a neighbour of the first's region
+    assert modified["rule"].startswith("sought: of the neighbours with shorter beams, the nearest")
     assert all(r["source_run_id"] == run_id for r in rows)
     assert all(r["field_trial_run_id"] for r in rows)
-    assert "candidate cell" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "candidate cell" not in printed  # the default rule walks no candidate
+    verdicts = list(csv.DictReader((out / "table1_verdicts.csv").open()))
+    lis_first = verdicts[0]
+    assert lis_first["claim"].startswith("The MAP-LIS first robot was incapable of walking")
+    walked = [
+        r["breaks"] != "True" and float(r["mean_distance_cm"] or "-inf") > 10.0
+        for r in rows[:4]
+    ]
+    for model, flat, carpet in (("lean", walked[0], walked[2]), ("full", walked[1], walked[3])):
+        never = int(not (flat or carpet))
+        assert f"walks on neither floor: {never} of 1 draws" in lis_first[f"evidence_{model}"]
+        assert lis_first[f"verdict_{model}"] == ("direction only" if never else "not reproduced")
+    assert "lean [" in printed and "full [" in printed
+
+
+def test_study_with_the_walked_rule_walks_the_candidates(store, tmp_path, capsys):
+    uri, _, _ = store
+    code = main(
+        ["hexapod", "study", GRID, "--modified", "walked", "--first", "best", "--seconds",
+         "1", "--repeats", "1", "--tracking-uri", uri]
+    )  # fmt: skip
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert printed.count("candidate cell") == 2  # the two filled neighbours, walked on flat
+    assert "walked: the neighbour walking furthest on flat" in printed
+
+
+def test_study_refuses_more_draws_than_trials_before_walking(store, tmp_path, capsys):
+    uri, _, _ = store
+    out = tmp_path / "none"
+    code = main(
+        ["hexapod", "study", GRID, "--trials-drawn", "2", "--out", str(out), "--tracking-uri",
+         uri]
+    )  # fmt: skip
+    assert code == 2
+    err = capsys.readouterr()
+    assert "--trials-drawn 2 is invalid for MAP-LIS: allowed 1..1" in err.err
+    assert "on flat" not in err.out and not out.exists()
+
+
+def test_sign_verdicts_follow_the_rule():
+    from linkevo.orchestrator.table_one_verdicts import sign_verdict
+
+    assert sign_verdict(9, 10) == "reproduced"  # two-sided exact p 0.021
+    assert sign_verdict(8, 10) == "direction only"  # p 0.11
+    assert sign_verdict(5, 10) == "not reproduced"
+    assert sign_verdict(1, 10) == "contradicted"
+    assert sign_verdict(1, 1) == "direction only"  # one draw can show no more
+
+
+def test_the_sought_rule_takes_the_nearest_path_with_the_builders_change():
+    from linkevo.orchestrator.walk_study import path_distance, path_traits
+
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    ellipse = (3 * np.cos(angles), np.sin(angles))
+    traits = path_traits(*ellipse, [{"length": 2.0}, {"length": 4.0}])
+    assert traits["width"] == pytest.approx(6.0, abs=0.05)
+    assert traits["height"] == pytest.approx(2.0, abs=0.05)
+    assert traits["mean_beam"] == 3.0
+    flat_bottom = (ellipse[0], np.maximum(ellipse[1], -0.5))
+    assert path_traits(*flat_bottom, [])["flatness"] > traits["flatness"]
+    moved = (ellipse[0] + 10, ellipse[1] - 4)
+    assert path_distance(ellipse, moved) == pytest.approx(0.0, abs=1e-12)
+    assert path_distance(ellipse, flat_bottom) > 0

@@ -407,3 +407,23 @@ def test_a_walking_grid_starts_from_a_walked_repertoire(store, lis_map, tmp_path
                           walks=6, seed_from=seed_from, tracking_uri=where)  # fmt: skip
         with pytest.raises(ConfigError, match=message):
             launch(again, progress=False)
+
+
+def test_a_walk_map_keeps_its_robot_and_refuses_to_resume_on_another(
+    store, lis_map, tmp_path, capsys
+):
+    uri, runs = store
+    run_id = runs["MAP-LIS"]
+    tags = MlflowClient(uri).get_run(run_id).data.tags
+    assert tags["walk_map_physics"] == "{}"  # walked on the study's robot
+    heavy = tmp_path / "heavy.toml"
+    shipped = (Path(__file__).parents[2] / "configs" / "hexapod.toml").read_text()
+    heavy.write_text(shipped.replace("frame_mass_kg = 1.1", "frame_mass_kg = 2.5"))
+    before = _walk_map(uri, run_id, tmp_path / "before")
+    argv = ["walkmap", run_id, "--cells", "best:6", "--resume", "--config", str(heavy),
+            "--tracking-uri", uri]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert 'its walk map walked a robot with physics {}, this one has {"frame_mass_kg": 2.5}' in err
+    assert "--restart to walk the map anew on this robot" in err
+    pd.testing.assert_frame_equal(_walk_map(uri, run_id, tmp_path / "after"), before)

@@ -184,7 +184,7 @@ def test_linkevo_sim_walks_a_robot_from_a_document_as_a_notebook_would():
 
     import linkevo.sim as sim
 
-    doc = json.loads((Path(__file__).parents[2] / "benchmarks" / "walk_linkage.json").read_text())
+    doc = json.loads((Path(__file__).parents[1] / "data" / "sound_leg.json").read_text())
     from linkevo.sim import FLOORS, WalkSettings, from_document, leg_from_genome
     from linkevo.sim import walk as walk_fn
 

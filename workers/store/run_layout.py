@@ -70,6 +70,9 @@ WALK_MAP = "walkmap.parquet"
 plus the cell's bins), logged by `linkevo walkmap`, or by a walking trial (fitness F_w)
 itself."""
 WALK_MAP_PNG = "walkmap.png"
+WALK_MAP_PHYSICS = "walk_map_physics"
+"""The tag of a run with a walk map: the walked robot's parameters that differ from the
+study's (`sim.robot.Physics.changed`), as JSON; "{}" for the study's robot."""
 WALK_PREDICTION = "walkpred.parquet"
 """A repertoire trial's predicted walks (`linkevo walkmodel predict`): a row per filled cell
 and floor (`workers.store.tables.PREDICTION_COLUMNS` plus the cell's bins); the run's tag
