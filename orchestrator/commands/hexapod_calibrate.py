@@ -12,8 +12,6 @@ from linkevo.orchestrator.commands.hexapod import load_robot
 
 def register(sub: argparse._SubParsersAction) -> None:
     """Adds `hexapod calibrate` to the hexapod group."""
-    from linkevo.orchestrator.calibration import CALIBRATED
-
     parser = sub.add_parser(
         "calibrate",
         help="fit the simulated robot's parameters to your robot's recorded field trials",
@@ -39,7 +37,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--params",
         required=True,
-        help=f"comma-separated names to fit, of: {', '.join(CALIBRATED)}",
+        help="comma-separated names to fit: any key of the robot config's [physics] "
+        "(frame_mass_kg, flat_friction, ...) or the gait's speed_rpm, kp, ki, kd",
     )
     parser.add_argument(
         "--out", required=True, type=Path, help="the calibrated robot config to write (.toml)"

@@ -49,28 +49,23 @@ def a12_interval(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     report is reproducible). Percentile intervals: BCa fails exactly where the samples do
     not overlap (A12 0 or 1), which is common here. NaN for a sample of fewer than two.
     """
-    if min(np.size(x), np.size(y)) < 2:
-        return np.nan, np.nan
-    result = bootstrap(
-        (np.asarray(x, dtype=float), np.asarray(y, dtype=float)),
-        _a12_along,
-        n_resamples=BOOTSTRAP_RESAMPLES,
-        confidence_level=CONFIDENCE,
-        method="percentile",
-        vectorized=True,
-        rng=np.random.default_rng(0),
-    )
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+    return _interval(_a12_along, x, y)
 
 
 def median_interval(x: np.ndarray) -> tuple[float, float]:
     """Returns the 95 % bootstrap interval of the median of x (n,), as `a12_interval`
     computes its own (percentile, 9,999 resamples, seeded); NaN for fewer than two."""
-    if np.size(x) < 2:
+    return _interval(np.median, x)
+
+
+def _interval(statistic, *samples: np.ndarray) -> tuple[float, float]:
+    """The 95 % percentile bootstrap interval of a vectorised statistic of the samples,
+    each resampled on its own, seeded; NaN when a sample has fewer than two values."""
+    if min(np.size(s) for s in samples) < 2:
         return np.nan, np.nan
     result = bootstrap(
-        (np.asarray(x, dtype=float),),
-        np.median,
+        tuple(np.asarray(s, dtype=float) for s in samples),
+        statistic,
         n_resamples=BOOTSTRAP_RESAMPLES,
         confidence_level=CONFIDENCE,
         method="percentile",
