@@ -18,7 +18,13 @@ DOC = (ROOT / "docs" / "results.md").read_text()
 COLUMNS = ("paper_10", "paper", "legacy_10", "legacy")
 """The claims table's verdict columns, left to right, as folders of docs/results/."""
 WORDS = ("no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine", "ten")
-SIMILARITY_SLIPS = ("the same as", "level with", "as diverse as", "as correlated as", "ties exactly")
+SIMILARITY_SLIPS = (
+    "the same as",
+    "level with",
+    "as diverse as",
+    "as correlated as",
+    "ties exactly",
+)
 """Ways of calling two approaches alike that the rule never licenses."""
 
 

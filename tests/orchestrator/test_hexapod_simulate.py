@@ -177,8 +177,7 @@ def test_study_predicts_first_and_modified_robots_from_the_5x5_map(store, tmp_pa
     lis_first = verdicts[0]
     assert lis_first["claim"].startswith("The MAP-LIS first robot was incapable of walking")
     walked = [
-        r["breaks"] != "True" and float(r["mean_distance_cm"] or "-inf") > 10.0
-        for r in rows[:4]
+        r["breaks"] != "True" and float(r["mean_distance_cm"] or "-inf") > 10.0 for r in rows[:4]
     ]
     for model, flat, carpet in (("lean", walked[0], walked[2]), ("full", walked[1], walked[3])):
         never = int(not (flat or carpet))

@@ -502,9 +502,7 @@ def test_every_report_figure_is_readable_at_page_width(loaded):
     for item in made:
         FigureCanvasAgg(item.figure).draw()  # ticks and their labels exist once drawn
         scale = min(1.0, fig.PAGE_WIDTH_IN / item.figure.get_figwidth())
-        texts = [
-            t for t in item.figure.findobj(Text) if t.get_visible() and t.get_text().strip()
-        ]
+        texts = [t for t in item.figure.findobj(Text) if t.get_visible() and t.get_text().strip()]
         assert texts
         smallest = min(t.get_fontsize() for t in texts) * scale
         assert smallest >= fig.MIN_FONT_PT, (item.name, smallest)
