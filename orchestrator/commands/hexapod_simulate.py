@@ -200,8 +200,8 @@ def study_handler(args: argparse.Namespace) -> int:
     from linkevo.workers.store.artifacts import write_text_atomic
     from linkevo.workers.store.runs import RunStore
 
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {args.out}: allowed a folder (it is a file)")
+    if args.out is not None and (args.out.suffix == ".csv" or args.out.is_file()):
+        raise CliError(f"--out {args.out}: allowed a folder (the two tables are written into it)")
     config = load_robot(args)
     table = predict_table_one(
         RunStore.open(args.tracking_uri, args.experiment),
