@@ -20,10 +20,10 @@ from linkevo.orchestrator.config import ConfigError, from_dict
 from linkevo.orchestrator.config_text import to_toml
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
-from linkevo.orchestrator.report.findings import MEASURES, best_path_sizes, check_findings
+from linkevo.orchestrator.report.findings import MEASURES, check_findings
 from linkevo.orchestrator.report.html import render_html
 from linkevo.orchestrator.report.load import GridData, load_grid
-from linkevo.orchestrator.report.measures import trial_measures
+from linkevo.orchestrator.report.measures import best_path_sizes, trial_measures
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
 from linkevo.orchestrator.report.verdicts import Finding
 from linkevo.workers.store.artifacts import write_bytes_atomic
@@ -121,7 +121,7 @@ def build_report(
     Writes `<name>.png` and `<name>.pdf` per figure, `trials.csv`, `best_loss_summary.csv`,
     `pairwise_tests.csv`, `findings.csv`, `best_linkage_checks.csv` (the physical checks of
     each trial's best linkage), `path_sizes.csv` (each trial's best-ever foot path's
-    size, `findings.best_path_sizes`) and `report.html`, and logs them all under
+    size, `measures.best_path_sizes`) and `report.html`, and logs them all under
     `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
     With `first_trials` = N only trial indices 0..N-1 of each cell count (a grid grown by
     `--resume --set trials=...` answered at its first N trials); the report goes to

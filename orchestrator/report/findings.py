@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.load import GridData, finished_trials
+from linkevo.orchestrator.report.load import finished_trials
 from linkevo.orchestrator.report.stats import (
     a12,
     a12_interval,
@@ -44,32 +43,6 @@ from linkevo.sim.study import (
     label,
     ordered,
 )
-from linkevo.workers.store.artifacts import read_document
-
-
-def best_path_sizes(grid: GridData) -> pd.DataFrame:
-    """Returns the size of each finished trial's best-ever foot path, read from its
-    best-linkage document, in model units (`../shared/spec`: 8 mm a module).
-
-    Returns:
-        Columns trial_key, approach, fitness, width, height, size (the larger of the two),
-        failed_angles (the linkage's crank angles that do not assemble; the path skips
-        them, which is how F_sl's best linkages reach their size, docs/results.md).
-    """
-    trials = grid.finished()
-    rows = []
-    for trial in trials[trials.best_linkage.notna()].itertuples():
-        doc = read_document(Path(trial.best_linkage))
-        path = doc["foot_path"]
-        x, y = np.array(path["x"], dtype=float), np.array(path["y"], dtype=float)  # None: NaN
-        if np.isfinite(x).any():
-            width, height = np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y)
-            size = max(width, height)
-            key = (trial.trial_key, trial.approach, trial.fitness)
-            rows.append((*key, width, height, size, int(doc["error"])))
-    columns = ["trial_key", "approach", "fitness", "width", "height", "size", "failed_angles"]
-    return pd.DataFrame(rows, columns=columns)
-
 
 HIGH_CORRELATION = 0.7
 """|rho| from which a correlation is called high (Hinkle, Wiersma and Jurs, "Applied

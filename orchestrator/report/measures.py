@@ -1,7 +1,10 @@
-"""Provides `trial_measures`: per-trial numbers some of the study's claims are judged on,
-beyond the ones each trial logs (best loss, coverage, common grid, path diversity)."""
+"""Provides `trial_measures` and `best_path_sizes`: per-trial numbers some of the study's
+claims are judged on, beyond the ones each trial logs (best loss, coverage, common grid,
+path diversity)."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -10,6 +13,7 @@ from scipy.stats import spearmanr
 from linkevo.algorithms.pareto import non_dominated_ranks
 from linkevo.orchestrator.report.load import GridData, read_archive
 from linkevo.sim.study import is_map_elites, is_pareto
+from linkevo.workers.store.artifacts import read_document
 
 
 def stagnation(history: pd.DataFrame) -> float:
@@ -68,3 +72,27 @@ def trial_measures(grid: GridData) -> pd.DataFrame:
     trials["descriptor_correlation"] = correlation
     trials["front_size"] = fronts
     return trials
+
+
+def best_path_sizes(grid: GridData) -> pd.DataFrame:
+    """Returns the size of each finished trial's best-ever foot path, read from its
+    best-linkage document, in model units (`../shared/spec`: 8 mm a module).
+
+    Returns:
+        Columns trial_key, approach, fitness, width, height, size (the larger of the two),
+        failed_angles (the linkage's crank angles that do not assemble; the path skips
+        them, which is how F_sl's best linkages reach their size, docs/results.md).
+    """
+    trials = grid.finished()
+    rows = []
+    for trial in trials[trials.best_linkage.notna()].itertuples():
+        doc = read_document(Path(trial.best_linkage))
+        path = doc["foot_path"]
+        x, y = np.array(path["x"], dtype=float), np.array(path["y"], dtype=float)  # None: NaN
+        if np.isfinite(x).any():
+            width, height = np.nanmax(x) - np.nanmin(x), np.nanmax(y) - np.nanmin(y)
+            size = max(width, height)
+            key = (trial.trial_key, trial.approach, trial.fitness)
+            rows.append((*key, width, height, size, int(doc["error"])))
+    columns = ["trial_key", "approach", "fitness", "width", "height", "size", "failed_angles"]
+    return pd.DataFrame(rows, columns=columns)
