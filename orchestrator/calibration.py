@@ -211,11 +211,11 @@ def calibrate(
     progress: Callable[[str], None] = print,
 ) -> Calibration:
     """Fits `names` to every trial, and measures the error on held-out trials by k-fold
-    cross-validation (k = min(`folds`, trials); trials dealt to folds in order).
+    cross-validation (k = min(`folds`, trials); trials dealt to folds in order; with one
+    trial there is no held-out error, NaN).
 
     Raises:
-        CalibrationError: an unknown parameter, or fewer than two trials for a held-out
-            error.
+        CalibrationError: an unknown parameter name, or none.
     """
     unknown = [n for n in names if n not in CALIBRATED]
     if unknown or not names:

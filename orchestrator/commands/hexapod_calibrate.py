@@ -113,6 +113,15 @@ def handle(args: argparse.Namespace) -> int:
         "folds": result.folds,
         "trials": len(trials),
         "walks": result.walks,
+        "per_trial": [
+            {
+                "run_id": t.run_id,
+                "floor": t.floor,
+                "measured_cm": round(m, 2),
+                "fitted_cm": round(f, 2),
+            }
+            for t, m, f in zip(trials, result.measured_cm, result.predicted_cm, strict=True)
+        ],
     }
     if args.json:
         print(json.dumps(report))

@@ -84,6 +84,7 @@ def test_calibration_recovers_the_hidden_speed_and_writes_a_config_commands_take
     speed = report["params"]["speed_rpm"]
     assert abs(speed - HIDDEN_SPEED_RPM) <= TOLERANCE * HIDDEN_SPEED_RPM
     assert report["start"] == {"speed_rpm": 25.0} and report["trials"] == 6
+    assert [t["run_id"] for t in report["per_trial"]] == runs
     assert report["heldout_rmse_cm"] < report["rmse_start_cm"]
     assert report["rmse_cm"] < report["rmse_start_cm"]
     written = load_config(out)
