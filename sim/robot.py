@@ -184,10 +184,10 @@ class Physics:
     motor_stall_nm: float = field(default=Motor.stall_nm, metadata=limits(0.1, 20.0))
     motor_no_load_rpm: float = field(default=Motor.no_load_rpm, metadata=limits(1.0, 600.0))
     motor_loop_gain: float = field(default=Motor.loop_gain, metadata=limits(0.0, 100.0))
-    flat_friction: float = field(default=0.35, metadata=limits(0.01, 3.0))
-    carpet_friction: float = field(default=0.9, metadata=limits(0.01, 3.0))
-    flat_contact_s: float = field(default=0.004, metadata=limits(0.0005, 0.2))
-    carpet_contact_s: float = field(default=0.02, metadata=limits(0.0005, 0.2))
+    flat_friction: float = field(default=FLOORS[FLAT].friction, metadata=limits(0.01, 3.0))
+    carpet_friction: float = field(default=FLOORS[CARPET].friction, metadata=limits(0.01, 3.0))
+    flat_contact_s: float = field(default=FLOORS[FLAT].solref[0], metadata=limits(0.0005, 0.2))
+    carpet_contact_s: float = field(default=FLOORS[CARPET].solref[0], metadata=limits(0.0005, 0.2))
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
