@@ -157,8 +157,8 @@ def _resume_command(args: argparse.Namespace) -> str:
 
 def summary(trial, frame) -> str:
     """One line per floor: cells walked, how many of them walk (and how many of those go
-    beyond the level-body bound) and break (the figure's words), the cells not walked, the
-    furthest walker."""
+    beyond the level-body bound) and break (and how many of those are frail legs), the
+    cells not walked, the furthest walker."""
     lines = [f"{trial.trial_key} (run {trial.run_id}): {layout.WALK_MAP}, {layout.WALK_MAP_PNG}"]
     for floor, part in frame.groupby("floor"):
         walked = part[part["status"] == "walked"]
@@ -172,8 +172,10 @@ def summary(trial, frame) -> str:
         others = part[part["status"] != "walked"]["status"].value_counts()
         skipped = "".join(f", {n} {status}" for status, n in others.items())
         beyond = int((sound["mean_distance_cm"] > sound["bound_cm"]).sum())
+        frail = int(walked["reason"].fillna("").str.contains("frail:").sum())
         lines.append(
             f"  {floor}: {len(walked)} cells walked: {len(sound)} walk ({beyond} beyond the "
-            f"level-body bound), {len(walked) - len(sound)} break{skipped}; {furthest}"
+            f"level-body bound), {len(walked) - len(sound)} break ({frail} frail){skipped}; "
+            f"{furthest}"
         )
     return "\n".join(lines)

@@ -108,6 +108,9 @@ def test_walkmap_walks_the_chosen_cells_on_both_floors_and_logs_the_map(store, l
             assert f"  {floor}: " in printed
             beyond = int((sound["mean_distance_cm"] > sound["bound_cm"]).sum())
             assert f"{len(sound)} walk ({beyond} beyond the level-body bound)" in printed
+            here = walked[walked["floor"] == floor]
+            frail = int(here["reason"].str.contains("frail:").sum())
+            assert f"{len(here) - len(sound)} break ({frail} frail)" in printed
 
 
 def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
