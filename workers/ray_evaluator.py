@@ -198,7 +198,14 @@ class ActorWalkers:
         options = actor_options(WalkWorker, n_actors, cpus_per_actor, placement_group)
         return cls([o.remote() for o in options])
 
-    def walk(self, genomes, mode, known, bars, physics):
+    def walk(
+        self,
+        genomes: np.ndarray,
+        mode: str,
+        known: frozenset[str],
+        bars: np.ndarray,
+        physics: Physics,
+    ):
         """Starts every candidate's walk now; yields each (walk, node) in order."""
         from ray.util import ActorPool
 

@@ -47,8 +47,8 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
     order = np.lexsort((cells, loss))
     keep = order[physical_checks(batch, simulate(batch, spec.n_angles)).buildable[order]]
     keep = keep[: spec.walk_rerank]
-    batch = CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,))
-    rows = walk_cells(batch, Physics.of(spec.physics))
+    walked = CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,))
+    rows = walk_cells(walked, Physics.of(spec.physics))
     distance = np.array([r["mean_distance_cm"] for r in rows], dtype=float)
     sound = np.array([r["status"] == "walked" and not r["breaks"] for r in rows], dtype=bool)
     columns = {c: np.array([r[c] for r in rows]) for c in COLUMNS}

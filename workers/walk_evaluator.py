@@ -61,7 +61,14 @@ class Walkers(Protocol):
 class LocalWalkers:
     """Builds and walks every candidate in this process, one after another."""
 
-    def walk(self, genomes, mode, known, bars, physics):
+    def walk(
+        self,
+        genomes: np.ndarray,
+        mode: str,
+        known: frozenset[str],
+        bars: np.ndarray,
+        physics: Physics,
+    ):
         host = socket.gethostname()
         for genome, bar in zip(genomes, bars, strict=True):
             yield walk_candidate(genome, mode, known, float(bar), physics=physics), host
