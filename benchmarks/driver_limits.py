@@ -221,7 +221,7 @@ def main() -> None:
     parser.add_argument("--stores", nargs="+", choices=["sqlite", "server"],
                         default=["sqlite", "server"])  # fmt: skip
     args = parser.parse_args()
-    ray.init(num_cpus=1, include_dashboard=False)  # run_trial_job tags its Ray node
+    ray.init(address="local", num_cpus=1, include_dashboard=False)  # run_trial_job tags its node
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         if "sqlite" in args.stores:

@@ -267,7 +267,9 @@ def main() -> int:
     genomes = random_genomes(np.random.default_rng(0), args.batch)
     # Three CPUs on two cores: section 1's 1-actor and 2-actor pools live side by side so
     # their calls can alternate; only one of them works at any time.
-    ray.init(num_cpus=3, object_store_memory=300 * 1024**2, include_dashboard=False)
+    ray.init(
+        address="local", num_cpus=3, object_store_memory=300 * 1024**2, include_dashboard=False
+    )
     try:
         actor_scaling(genomes)
         with tempfile.TemporaryDirectory() as tmp:

@@ -98,7 +98,7 @@ def actors(args: argparse.Namespace, work: Path) -> None:
     from linkevo.workers.trial import run_trial
     from linkevo.workers.trial_spec import TrialSpec
 
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
     rates = {}
     for k in (1, 2):
         spec = TrialSpec.walking("MAP-LIS", args.walks, seed=1)

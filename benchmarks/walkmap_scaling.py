@@ -64,7 +64,7 @@ def main() -> None:
 
     import ray
 
-    ray.init(num_cpus=2, include_dashboard=False, logging_level="WARNING")
+    ray.init(address="local", num_cpus=2, include_dashboard=False, logging_level="WARNING")
 
     def on_ray(work, items):
         return run_on_ray(work, items, in_flight=4)

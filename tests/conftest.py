@@ -71,6 +71,9 @@ def ray_local():
     """One small local Ray instance for the whole test module."""
     import ray
 
-    ray.init(num_cpus=2, object_store_memory=200 * 1024**2, include_dashboard=False)
+    # "local": a new instance even while a `ray start` cluster of another test is up
+    ray.init(
+        address="local", num_cpus=2, object_store_memory=200 * 1024**2, include_dashboard=False
+    )
     yield ray
     ray.shutdown()
