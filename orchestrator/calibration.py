@@ -27,13 +27,15 @@ import numpy as np
 
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.field_trial import REAL
+from linkevo.orchestrator.simulated_trials import gait_of
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.gait import GaitConfig
 from linkevo.sim.leg import leg_from_genome
-from linkevo.sim.linkage_doc import from_document, parse_document
-from linkevo.sim.robot import PHYSICS_KEYS, Physics
+from linkevo.sim.linkage_doc import from_document
+from linkevo.sim.robot import PHYSICS_KEYS, Physics, floor
 from linkevo.sim.walking import WalkSettings, walk
 from linkevo.workers.store import run_layout as layout
+from linkevo.workers.store.artifacts import read_document
 
 GAIT_KEYS: tuple[str, ...] = ("speed_rpm", "kp", "ki", "kd")
 """The gait's values a calibration may fit (`[gait]` of the robot config)."""
@@ -110,8 +112,7 @@ def read_field_trials(store, run_ids: list[str]) -> list[FieldTrial]:
         if not history:
             raise CalibrationError(f"--trials {run_id}: the field trial has no distances")
         with tempfile.TemporaryDirectory() as tmp:
-            path = store.client.download_artifacts(run_id, layout.LINKAGE_JSON, tmp)
-            document = parse_document(Path(path).read_bytes(), f"run {run_id}")
+            document = read_document(store.download(run_id, layout.LINKAGE_JSON, Path(tmp)))
         trials.append(
             FieldTrial(
                 run_id=run_id,
@@ -148,15 +149,15 @@ def bounds(name: str) -> tuple[float, float]:
 
 def simulated_cm(config: RobotConfig, trials: list[FieldTrial]) -> np.ndarray:
     """Returns (T,) the distance the simulator walks each trial's linkage, in cm."""
-    gait_offsets = {m.name: m.phase_deg for m in config.motors}
+    gait, offsets = gait_of(config)
     out = []
     for trial in trials:
         leg = leg_from_genome(*from_document(trial.document))
         w = walk(
             leg,
-            config.physics.floor(trial.floor),
-            gait=config.gait,
-            offsets_deg=gait_offsets,
+            floor(trial.floor),
+            gait=gait,
+            offsets_deg=offsets,
             settings=WalkSettings(seconds=trial.seconds),
             physics=config.physics,
         )
