@@ -178,7 +178,8 @@ def _nested_axis(ax, axis: str, space: DescriptorSpace, outer: int, inner: int) 
     edges = np.arange(1, r) * r - 0.5
     lines = ax.vlines if axis == "x" else ax.hlines
     lines(edges, -0.5, r * r - 0.5, color="0.8", lw=0.4)
-    text = f"{space.names[outer]} (outer bins) › {space.names[inner]} (inner, 0–{r - 1})"
+    # two lines: a label as long as the axis would run into its neighbours at page width
+    text = f"{space.names[outer]} (outer bins)\n› {space.names[inner]} (inner, 0–{r - 1})"
     (ax.set_xlabel if axis == "x" else ax.set_ylabel)(text)
 
 
