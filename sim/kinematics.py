@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -78,3 +79,15 @@ def simulate(
         motion.foot,
     )
     return motion
+
+
+def take_rows(arrays, index: np.ndarray):
+    """Returns the rows `index` of a LinkageBatch or Motion (every array field)."""
+    return dataclasses.replace(
+        arrays,
+        **{
+            f.name: getattr(arrays, f.name)[index]
+            for f in dataclasses.fields(arrays)
+            if isinstance(getattr(arrays, f.name), np.ndarray)
+        },
+    )

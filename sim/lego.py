@@ -22,9 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim import reference
-from linkevo.sim.decoding import NODE_KINDS, LinkageBatch, decode
+from linkevo.sim.builds import with_lengths
+from linkevo.sim.decoding import LinkageBatch, decode
 from linkevo.sim.fitness import named_target
-from linkevo.sim.kinematics import Motion, simulate
+from linkevo.sim.kinematics import Motion, simulate, take_rows
 from linkevo.sim.physical import PhysicalChecks, max_stretch, physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES
 
@@ -161,17 +162,19 @@ def _closest_rounding(
     coarse = simulate(_with_lengths(base, combos), n_angles, only=every)
     alive = np.flatnonzero(coarse.valid.all(axis=1))
     combos = combos[alive]
-    order = np.argsort(_shifts(_rows(coarse, alive), here, every), kind="stable")
+    order = np.argsort(_shifts(take_rows(coarse, alive), here, every), kind="stable")
     batch = _with_lengths(base, combos)
     stretch = np.full(len(combos), np.inf)
     turning = np.zeros(len(combos), dtype=bool)
     best, feasible = -1, 0
     for chunk in _chunks(order, count_feasible):
-        motion = simulate(_rows(batch, chunk), n_angles)
+        motion = simulate(take_rows(batch, chunk), n_angles)
         turns = motion.valid.all(axis=1)
         turning[chunk] = turns
         if turns.any():
-            stretch[chunk[turns]] = max_stretch(_rows(batch, chunk[turns]), _rows(motion, turns))
+            stretch[chunk[turns]] = max_stretch(
+                take_rows(batch, chunk[turns]), take_rows(motion, turns)
+            )
         rigid = chunk[turns & (stretch[chunk] <= EXACT)]
         feasible += len(rigid)
         if best < 0 and len(rigid):
@@ -224,18 +227,6 @@ def _chunks(order: np.ndarray, whole: bool) -> list[np.ndarray]:
     return out
 
 
-def _rows(arrays, index: np.ndarray):
-    """The rows `index` of a LinkageBatch or Motion (every array field)."""
-    return dataclasses.replace(
-        arrays,
-        **{
-            f.name: getattr(arrays, f.name)[index]
-            for f in dataclasses.fields(arrays)
-            if isinstance(getattr(arrays, f.name), np.ndarray)
-        },
-    )
-
-
 def _roundings(length: float) -> tuple[int, ...]:
     low, high = max(math.floor(length), 1), max(math.ceil(length), 1)
     return (low,) if low == high else (low, high)
@@ -243,34 +234,11 @@ def _roundings(length: float) -> tuple[int, ...]:
 
 def _with_lengths(base: LinkageBatch, lengths: np.ndarray) -> LinkageBatch:
     """Returns R copies of a one-linkage batch with beam lengths (R, B) put into its
-    node parameters (the crank, each triangle's l1 and l2, each extension's length)."""
+    node parameters (`sim.builds.with_lengths`)."""
     r, n_beams = lengths.shape
-    node_float = np.repeat(base.node_float, r, axis=0)
-    beam_length = np.repeat(base.beam_length, r, axis=0)
-    beam_length[:, :n_beams] = lengths
-    kinds = base.node_int[0, :, 0]
-    ends = base.beam_int[0, :n_beams, 1]
-    for j, kind in enumerate(kinds):
-        beams = np.flatnonzero(ends == j)  # the beams that place node j, in decode order
-        name = NODE_KINDS[int(kind)]
-        if name in ("crank", "extension"):
-            node_float[:, j, 0] = lengths[:, beams[0]]
-        elif name == "triangle":
-            l1, l2 = lengths[:, beams[0]], lengths[:, beams[1]]
-            node_float[:, j, 0], node_float[:, j, 1] = l1, l2
-            same = l1 == l2  # the backup point exists only then (sim.kernels)
-            angle = node_float[:, j, 2]
-            node_float[:, j, 3] = np.where(same, l1 * np.cos(angle), 0.0)
-            node_float[:, j, 4] = np.where(same, l1 * np.sin(angle), 0.0)
-    return dataclasses.replace(
-        base,
-        node_int=np.repeat(base.node_int, r, axis=0),
-        node_float=node_float,
-        beam_int=np.repeat(base.beam_int, r, axis=0),
-        beam_length=beam_length,
-        n_beams=np.repeat(base.n_beams, r),
-        positions0=np.repeat(base.positions0, r, axis=0),
-    )
+    padded = np.zeros((r, base.beam_length.shape[1]))
+    padded[:, :n_beams] = lengths
+    return with_lengths(take_rows(base, np.zeros(r, dtype=np.int64)), padded)
 
 
 def _foot_path(motion: Motion, i: int) -> tuple[np.ndarray, np.ndarray]:

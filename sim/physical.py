@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim.decoding import NODE_KINDS, LinkageBatch
-from linkevo.sim.kinematics import Motion
+from linkevo.sim.kinematics import Motion, take_rows
 
 TOGGLE_DEG = 5.0
 """A transmission angle below this is a toggle position."""
@@ -83,7 +83,7 @@ class PhysicalChecks:
         }
 
 
-def _quiet(function):
+def quiet_all_nan(function):
     """Runs `function` without numpy's all-NaN warnings (linkages or angles that never
     assemble)."""
 
@@ -96,7 +96,7 @@ def _quiet(function):
     return quiet
 
 
-@_quiet
+@quiet_all_nan
 def max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
     """Returns (N,) the largest beam stretch of each linkage, modules (NaN if it never
     assembles)."""
@@ -111,26 +111,38 @@ def max_stretch(batch: LinkageBatch, motion: Motion) -> np.ndarray:
     return np.fmax.reduce(stretch.reshape(pos.shape[0], -1), axis=1)  # NaN-skipping max
 
 
-@_quiet
-def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
-    """Returns the checks of decoded linkages and their simulated motion (N linkages)."""
+@quiet_all_nan
+def physical_checks(
+    batch: LinkageBatch, motion: Motion, rigid: np.ndarray | None = None
+) -> PhysicalChecks:
+    """Returns the checks of decoded linkages and their simulated motion (N linkages).
+
+    rigid: (N,) bool, rows known to keep every beam's length (a LEGO build that turns
+    rigidly, `sim.builds`): their stretch is 0 without measuring it."""
     pos = motion.positions  # (N, 12, A, 2), NaN at failed angles
     n = pos.shape[0]
     rows = np.arange(n)[:, None]
-    stretch = max_stretch(batch, motion)
+    if rigid is None:
+        stretch = max_stretch(batch, motion)
+    else:
+        stretch = np.where(motion.valid.any(axis=1), 0.0, np.nan)
+        measure = np.flatnonzero(~rigid)
+        if len(measure):
+            stretch[measure] = max_stretch(take_rows(batch, measure), take_rows(motion, measure))
 
     # Each triangle joint's transmission angle (N, T, A); T: the most triangles of any row.
     triangle = batch.node_int[:, :, 0] == NODE_KINDS.index("triangle")  # (N, 12)
     order = np.argsort(~triangle, axis=1, kind="stable")[:, : max(int(triangle.sum(1).max()), 1)]
     joint = np.take_along_axis(triangle, order, axis=1)  # (N, T) a real triangle
     node_int = np.take_along_axis(batch.node_int, order[:, :, None], axis=1)
-    at = pos[rows, order]
-    u = pos[rows, np.where(joint, node_int[:, :, 1], 0)] - at  # joint -> A
-    v = pos[rows, np.where(joint, node_int[:, :, 2], 0)] - at  # joint -> C
-    dot = u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]
-    norms = np.sqrt(u[..., 0] * u[..., 0] + u[..., 1] * u[..., 1]) * np.sqrt(
-        v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1]
-    )
+    px, py = np.ascontiguousarray(pos[..., 0]), np.ascontiguousarray(pos[..., 1])  # (N, 12, A)
+    joint_at = (rows, order)
+    a_at = (rows, np.where(joint, node_int[:, :, 1], 0))
+    c_at = (rows, np.where(joint, node_int[:, :, 2], 0))
+    ux, uy = px[a_at] - px[joint_at], py[a_at] - py[joint_at]  # joint -> A, (N, T, A)
+    vx, vy = px[c_at] - px[joint_at], py[c_at] - py[joint_at]  # joint -> C
+    dot = ux * vx + uy * vy
+    norms = np.sqrt(ux * ux + uy * uy) * np.sqrt(vx * vx + vy * vy)
     angle = np.degrees(np.arccos(np.clip(dot / norms, -1.0, 1.0)))  # (N, T, A)
     transmission = np.where(joint[:, :, None], np.minimum(angle, 180.0 - angle), np.inf)
     per_angle = np.where(np.isnan(transmission), np.inf, transmission).min(axis=1)  # (N, A)
@@ -138,11 +150,15 @@ def physical_checks(batch: LinkageBatch, motion: Motion) -> PhysicalChecks:
     lowest = per_angle.min(axis=1)
     min_transmission = np.where(motion.valid.any(axis=1), np.minimum(lowest, 90.0), np.nan)
 
-    flat = pos.reshape(n, -1, 2)
     return PhysicalChecks(
         turns_fully=motion.valid.all(axis=1),
         min_transmission_deg=min_transmission,
         toggle_passages=toggles.astype(np.int64),
         max_stretch=stretch,
-        size_modules=np.fmax.reduce(flat, axis=1) - np.fmin.reduce(flat, axis=1),
+        size_modules=np.stack([_extent(px.reshape(n, -1)), _extent(py.reshape(n, -1))], axis=1),
     )
+
+
+def _extent(values: np.ndarray) -> np.ndarray:
+    """Returns (N,) the NaN-skipping max minus min of each row of values (N, K)."""
+    return np.fmax.reduce(values, axis=1) - np.fmin.reduce(values, axis=1)
