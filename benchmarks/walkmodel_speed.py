@@ -4,16 +4,19 @@ Run: `.venv/bin/python benchmarks/walkmodel_speed.py [--cells 10000] [--sample 2
 
 A repertoire of `--cells` random genomes that pass the 2-D checks (paper mode) is predicted
 on one core by a walk model fitted on walks of the same kind (its size is what a trained
-model has; its weights do not change its speed): `sim.walk_features` (the 2-D kernel's
-batch simulation, checks and roundings) plus the ensemble's forward pass, process CPU time,
-best of 3. The walk map's cost comes from the same run: `--sample` of those cells built and
-walked 10 s on both floors (`sim.walk_map.walk_cells`), per cell, times `--cells`.
+model has; its weights do not change its speed): `sim.walk_features` (each cell's LEGO
+build found by `sim.builds`, the 2-D kernel's simulation of it, its checks and tripod gait)
+plus the ensemble's forward pass, process CPU time, best of 3. In the same run: the builds
+alone, against `sim.lego.whole_module_build` (the exhaustive search `linkevo pull` uses)
+on `--sample` of the cells; and the walk map's cost: `--sample` cells built and walked 10 s
+on both floors (`sim.walk_map.walk_cells`), per cell, times `--cells`.
 Goal: <= 2 s for 10,000 cells, build features included.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import time
 
@@ -31,6 +34,8 @@ def main() -> None:
     numba.set_num_threads(1)
     from linkevo.algorithms.walk_model import WalkData, WalkModel
     from linkevo.sim import decode, simulate
+    from linkevo.sim.builds import lego_builds
+    from linkevo.sim.lego import QuantiseError, whole_module_build
     from linkevo.sim.physical import physical_checks
     from linkevo.sim.walk_features import FEATURE_NAMES, walk_features
     from linkevo.sim.walk_map import CellBatch, walk_cells
@@ -56,6 +61,13 @@ def main() -> None:
 
     predict_s = best_of_3(lambda: model.predict(walk_features(genomes)))
     features_s = best_of_3(lambda: walk_features(genomes))
+    builds_s = best_of_3(lambda: lego_builds(decode(genomes, "paper")))
+
+    start = time.process_time()
+    for genome in genomes[: args.sample]:
+        with contextlib.suppress(QuantiseError):
+            whole_module_build(genome, "paper")
+    plain_per_cell = (time.process_time() - start) / args.sample
 
     sample = genomes[: args.sample]
     start = time.process_time()
@@ -64,6 +76,9 @@ def main() -> None:
     walk_s = per_cell * args.cells
     print(f"{args.cells} buildable cells (paper mode), one core:")
     print(f"  walk model: {predict_s:.2f} s (features {features_s:.2f} s; goal <= 2 s)")
+    print(f"  LEGO builds: {builds_s:.2f} s ({builds_s / args.cells * 1e3:.3f} ms a cell); "
+          f"the exhaustive search {plain_per_cell * 1e3:.1f} ms a cell ({args.sample} cells): "
+          f"{plain_per_cell * args.cells / builds_s:,.0f}x")  # fmt: skip
     print(f"  walk map: {per_cell:.3f} s per cell ({args.sample} built and walked 10 s on both "
           f"floors) = {walk_s / 60:.1f} min for every cell")  # fmt: skip
     print(f"  prediction is {walk_s / predict_s:,.0f}x faster than walking")

@@ -37,12 +37,11 @@ def lego_builds(batch: LinkageBatch, here: Motion | None = None) -> tuple[Linkag
     bool: False where no rounding was found and the row is the linkage as evolved.
     `here` is the batch's motion over `DEFAULT_ANGLES`, where the caller has it."""
     here = simulate(batch, DEFAULT_ANGLES) if here is None else here
-    lengths = np.full((len(batch), batch.beam_length.shape[1]), -1.0)
-    todo = np.arange(len(batch))
-    for keep in KEEP:
+    lengths = _round(batch, here, KEEP[0])
+    for keep in KEEP[1:]:
+        todo = np.flatnonzero(lengths[:, 0] < 0)
         if len(todo):
             lengths[todo] = _round(take_rows(batch, todo), take_rows(here, todo), keep)
-            todo = todo[lengths[todo, 0] < 0]
     built = lengths[:, 0] > 0
     return with_lengths(batch, np.where(built[:, None], lengths, batch.beam_length)), built
 

@@ -17,8 +17,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="learn how far legs walk from the walk maps, and predict whole repertoires",
         description=(
             "A model that predicts, per floor, how far a leg's robot walks in 10 s and "
-            "whether it breaks, from what is known without physics (the linkage, its foot "
-            "path, its 2-D checks, its beams' whole-module roundings): docs/walking.md."
+            "whether it breaks, from what is known without physics (the leg's LEGO build, its "
+            "foot path, its 2-D checks, a quasi-static tripod gait): docs/walking.md."
         ),
     )
     sub = parser.add_subparsers(dest="walkmodel_command", required=True, metavar="ACTION")

@@ -7,7 +7,8 @@ their layout). Positions are (12, A) arrays, one column per crank angle: the top
 shared by every column, so the loops over columns carry no data-dependent branches and
 vectorise. The hot loops index whole arrays rather than slicing them (a slice builds a view
 on every use). The modules: `codes` (constants), `jit` (numba options), `geometry`,
-`placement`, `measures` (per-linkage helpers), `batch` (the entry points).
+`placement`, `measures` (per-linkage helpers), `batch` (the entry points), `rounding` (the
+whole-module rounding search, `sim.builds`).
 """
 
 from linkevo.sim.kernels.batch import (
