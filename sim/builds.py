@@ -6,7 +6,7 @@ A leg walks as it is built, and its whole-module rounding moves its foot path (b
 to 4 modules rounded by up to half a module), so the walk model reads the build, not the
 linkage as evolved. `sim.lego.quantise` finds the build by simulating every rounding (up
 to 32,768, 0.03-0.2 s a linkage); `sim.kernels.rounding` finds the same rounding by a
-depth-first search for 97-100 % of study linkages (the rest: a rounding nearly as close,
+depth-first search for 94-99.5 % of study linkages (the rest: a rounding nearly as close,
 or, in a few per thousand, none found, where the linkage as evolved stands in, as in a
 walk map).
 """

@@ -8,7 +8,7 @@ the LEGO build, whose whole-module rounding moves the foot path (beams of 2-4 mo
 rounded by up to half a module), so every feature is of the build (`sim.builds`: the
 rounding `linkevo pull` builds, found for a whole batch at once; the linkage as evolved
 where none is found). All of it comes from the 2-D kernel at the study's 40 crank angles,
-for a whole repertoire at once (no MuJoCo: 10,000 cells in about a second).
+for a whole repertoire at once (no MuJoCo: 10,000 cells in one to two seconds).
 
 The features of one linkage (`FEATURE_NAMES`, in modules or degrees), of its build:
 - the foot path, x then y at each of the 40 angles, relative to the motor axle, mirrored so

@@ -7,13 +7,15 @@ coarse crank angles and takes, closest foot path first, the first that turns wit
 beams over the whole turn. Here the nodes are placed one at a time, each beam choice
 once for every rounding that shares the beams before it (the kernels of `placement`, so
 the positions are those of `simulate`, bit for bit), and a node that fails to assemble or
-stretches a beam at a coarse angle cuts off every rounding below it. The foot's position
+stretches a beam at a coarse angle cuts off every rounding below it, as does one too far
+from the original foot path for the foot, at most its beams' length away, to come within
+the `keep` closest found so far. The foot's position
 depends only on the beams of its ancestors ("foot beams"), so the search runs in two
 stages: every assignment of the foot beams, keeping the `keep` closest foot paths in
 product order; then, for each of those in order, the other beams in product order, until
 a rounding turns over the whole turn with rigid beams and keeps the foot node. That is
 `quantise`'s choice unless its answer lies beyond the `keep` closest foot paths, moves the
-foot to another node, or ties with another in floating point (1-3 % of study linkages);
+foot to another node, or ties with another in floating point (0.5-6 % of study linkages);
 a linkage with no rounding found gets -1.
 """
 

@@ -12,7 +12,7 @@ from linkevo.sim.builds import lego_builds, with_lengths
 from linkevo.sim.decoding import NODE_KINDS
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.lego import QuantiseError, whole_module_build
-from linkevo.sim.physical import max_stretch
+from linkevo.sim.physical import max_stretch, physical_checks
 from linkevo.sim.walk_features import _tripod
 
 
@@ -45,6 +45,13 @@ def test_the_builds_are_quantises_and_turn_rigidly(turning):
     motion = simulate(built_batch)
     assert motion.valid[built].all()
     assert (max_stretch(built_batch, motion)[built] <= 1e-9).all()
+    # the checks take a rigid build's stretch as 0 and measure the others as ever
+    told, measured = (
+        physical_checks(built_batch, motion, rigid=built),
+        physical_checks(built_batch, motion),
+    )
+    np.testing.assert_allclose(told.max_stretch, measured.max_stretch, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(told.size_modules, measured.size_modules)
 
 
 def test_with_lengths_writes_them_as_decoding_does(turning):
