@@ -1,7 +1,9 @@
-"""Provides LinkageBatch and `decode`: genomes to linkage topology at crank angle 0."""
+"""Provides LinkageBatch and `decode`: genomes to linkage topology at crank angle 0; and
+`with_lengths`: a batch with other beam lengths."""
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,3 +99,39 @@ def decode(genomes: np.ndarray, mode: str = "paper") -> LinkageBatch:
         batch.positions0,
     )
     return batch
+
+
+def with_lengths(batch: LinkageBatch, lengths: np.ndarray) -> LinkageBatch:
+    """Returns the batch (N linkages) with beam lengths (N, 15) put into its node
+    parameters: the crank's, each extension's length, each triangle's l1 and l2 and its
+    backup point (which exists only where l1 == l2, as `sim.decoding` writes it)."""
+    n = len(batch)
+    present = np.arange(lengths.shape[1])[None, :] < batch.n_beams[:, None]
+    lengths = np.where(present, lengths, 0.0)
+    ends = np.where(present, batch.beam_int[:, :, 1], -1)
+    # each node's first and second beam (those that place it), -1 where none
+    first = np.full((n, batch.node_int.shape[1]), -1)
+    second = first.copy()
+    for b in range(lengths.shape[1] - 1, -1, -1):  # last first, so the earliest stays first
+        rows = np.flatnonzero(ends[:, b] >= 0)
+        node = ends[rows, b]
+        second[rows, node] = first[rows, node]
+        first[rows, node] = b
+    node_float = batch.node_float.copy()
+    rows = np.arange(n)
+    kind = batch.node_int[:, :, 0]
+    for j in range(node_float.shape[1]):
+        one = (
+            (kind[:, j] == NODE_KINDS.index("crank"))
+            | (kind[:, j] == NODE_KINDS.index("extension"))
+        ) & (first[:, j] >= 0)
+        node_float[one, j, 0] = lengths[rows[one], first[one, j]]
+        tri = (kind[:, j] == NODE_KINDS.index("triangle")) & (second[:, j] >= 0)
+        l1 = lengths[rows[tri], first[tri, j]]
+        l2 = lengths[rows[tri], second[tri, j]]
+        angle = node_float[tri, j, 2]
+        node_float[tri, j, 0] = l1
+        node_float[tri, j, 1] = l2
+        node_float[tri, j, 3] = np.where(l1 == l2, l1 * np.cos(angle), 0.0)
+        node_float[tri, j, 4] = np.where(l1 == l2, l1 * np.sin(angle), 0.0)
+    return dataclasses.replace(batch, node_float=node_float, beam_length=lengths)

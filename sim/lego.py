@@ -22,15 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim import reference
-from linkevo.sim.builds import with_lengths
-from linkevo.sim.decoding import LinkageBatch, decode
+from linkevo.sim.decoding import LinkageBatch, decode, with_lengths
 from linkevo.sim.fitness import named_target
+from linkevo.sim.kernels.codes import EXACT
 from linkevo.sim.kinematics import Motion, simulate, take_rows
 from linkevo.sim.physical import PhysicalChecks, max_stretch, physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES
 
-EXACT = 1e-9
-"""Largest beam stretch (modules) of a rounding that counts as exact kinematics."""
 COARSE_ANGLES = 8
 """Roundings are ranked at about this many of the turn's crank angles, evenly spaced (the
 same angles, bit for bit, as the whole turn's): the closest there is the closest over the
@@ -234,7 +232,7 @@ def _roundings(length: float) -> tuple[int, ...]:
 
 def _with_lengths(base: LinkageBatch, lengths: np.ndarray) -> LinkageBatch:
     """Returns R copies of a one-linkage batch with beam lengths (R, B) put into its
-    node parameters (`sim.builds.with_lengths`)."""
+    node parameters (`sim.decoding.with_lengths`)."""
     r, n_beams = lengths.shape
     padded = np.zeros((r, base.beam_length.shape[1]))
     padded[:, :n_beams] = lengths

@@ -9,6 +9,9 @@ TOL = 0.1
 """The tolerance of circle_intersection (spec §2), as published."""
 L_MAX = 15.0
 L_MIN = 2.0
+EXACT = 1e-9
+"""Largest beam stretch (modules) of a whole-module rounding that counts as exact
+kinematics, a rigid beam (`sim.lego`, `kernels.rounding`)."""
 MAX_ANCHOR_DIST = 30.0
 MIN_ANCHOR_DIST = 0.1
 BAND = 0.5

@@ -27,7 +27,7 @@ import numba
 import numpy as np
 
 from linkevo.sim.genome import MAX_BEAMS, N_NODES
-from linkevo.sim.kernels.codes import CRANK_TIP, EXTENSION, TRIANGLE
+from linkevo.sim.kernels.codes import CRANK_TIP, EXACT, EXTENSION, TRIANGLE
 from linkevo.sim.kernels.jit import _BATCH
 from linkevo.sim.kernels.measures import find_foot
 from linkevo.sim.kernels.placement import (
@@ -37,9 +37,6 @@ from linkevo.sim.kernels.placement import (
     place_triangle,
     simulate_one,
 )
-
-EXACT = 1e-9
-"""Largest beam stretch (modules) of a rigid beam (`sim.lego.EXACT`)."""
 
 
 @numba.njit(**_BATCH)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim.builds import lego_builds, with_lengths
-from linkevo.sim.decoding import NODE_KINDS
+from linkevo.sim.builds import lego_builds
+from linkevo.sim.decoding import NODE_KINDS, with_lengths
 from linkevo.sim.kinematics import simulate
 from linkevo.sim.lego import QuantiseError, whole_module_build
 from linkevo.sim.physical import max_stretch, physical_checks
