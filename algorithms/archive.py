@@ -10,7 +10,7 @@ import numpy as np
 
 from linkevo.algorithms import scoring
 from linkevo.algorithms.individuals import Individuals
-from linkevo.sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
+from linkevo.sim.linkage.descriptors import DescriptorSpace, bin_descriptors, cell_index
 
 if TYPE_CHECKING:
     from linkevo.algorithms.ribs_grid import PublishedGrid

@@ -13,7 +13,7 @@ from linkevo.algorithms.aurora_paths import prepare_paths, valid_rows
 from linkevo.algorithms.aurora_settings import AuroraSettings
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.map_elites import MapElites
-from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.study import DEFAULT_ANGLES
 
 _TORCH_SEED_TAG = 0xA0A0

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from linkevo.sim.kernels import NOALIAS
+from linkevo.sim.linkage.kernels import NOALIAS
 
 LANES = 16
 """float32 lanes of one 512-bit vector: the batch is padded to a multiple of this."""
@@ -35,7 +35,7 @@ _FLAGS = {"fastmath": False, "error_model": "numpy", "cache": True}
 """IEEE arithmetic in the written order: no reassociated sums, no fused multiply-adds, so
 the bits do not depend on the CPU's vector width or on whether it has FMA."""
 _HELPER = {**_FLAGS, "_nrt": False, "forceinline": True, **NOALIAS}
-"""Helpers are inlined by LLVM with their arrays `noalias` (see `sim.kernels._JIT`), which
+"""Helpers are inlined by LLVM with their arrays `noalias` (see `sim.linkage.kernels._JIT`), which
 lets LLVM keep each row's sums in registers."""
 
 

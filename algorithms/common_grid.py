@@ -6,11 +6,11 @@ from __future__ import annotations
 import numpy as np
 
 from linkevo.algorithms import scoring
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
 
 COMMON_SPACE = "MAP-LIS"
 """The shared grid: MAP-LIS's (mean beam length x lift, 100 x 100), whose descriptors
-`sim.evaluating` computes for every genome, whatever the approach."""
+`sim.linkage.evaluating` computes for every genome, whatever the approach."""
 
 
 class CommonGrid:

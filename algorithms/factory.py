@@ -7,7 +7,7 @@ from linkevo.algorithms.map_elites import MapElites
 from linkevo.algorithms.nsga2 import NSGA2
 from linkevo.algorithms.optimizer import Optimizer
 from linkevo.algorithms.random_sampling import RandomSampling
-from linkevo.sim.descriptors import COVERAGE_SPACES, check_coverage_space
+from linkevo.sim.linkage.descriptors import COVERAGE_SPACES, check_coverage_space
 from linkevo.sim.study import APPROACHES, DEFAULT_ANGLES, MULTI_OBJECTIVE, evaluated_fitness
 
 _OPTIONS: dict[str, tuple[str, ...]] = {
@@ -21,7 +21,7 @@ _OPTIONS: dict[str, tuple[str, ...]] = {
 
 
 def eval_fitness(approach: str, fitness: str) -> str:
-    """Returns the `sim.evaluating` fitness an approach needs: "Fp2"/"Fsl2" for NSGA2."""
+    """Returns the `sim.linkage.evaluating` fitness an approach needs: "Fp2"/"Fsl2" for NSGA2."""
     return evaluated_fitness(fitness, approach in MULTI_OBJECTIVE)
 
 

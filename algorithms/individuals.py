@@ -6,7 +6,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from linkevo.sim.genome import N_GENES
+from linkevo.sim.linkage.genome import N_GENES
 
 
 @dataclass(frozen=True)

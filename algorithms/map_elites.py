@@ -8,8 +8,8 @@ from linkevo.algorithms.archive import GridArchive
 from linkevo.algorithms.common_grid import COMMON_SPACE
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.optimizer import BaseOptimizer
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
-from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.sim.linkage.evaluation import Evaluation
 
 
 class MapElites(BaseOptimizer):
@@ -22,7 +22,7 @@ class MapElites(BaseOptimizer):
 
     Args:
         approach: "MAP-WH", "MAP-LIS", "MAP-ST" (or a subclass's name such as "MAP-AU").
-        space: the grid; None takes `sim.descriptors.DESCRIPTOR_SPACES[approach]`.
+        space: the grid; None takes `sim.linkage.descriptors.DESCRIPTOR_SPACES[approach]`.
         **kwargs: as `BaseOptimizer`.
     """
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from linkevo.sim.genome import LENGTH_GENES, N_GENES
+from linkevo.sim.linkage.genome import LENGTH_GENES, N_GENES
 
 GENE_PROBABILITY = 0.2
 """Chance that a non-length gene mutates (paper) or that every gene is reset (legacy)."""

@@ -12,8 +12,8 @@ from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.mutation import check_initial_sigma, initial_sigma, mutate, n_sigmas
 from linkevo.algorithms.rng_state import decode_rng, encode_rng
 from linkevo.algorithms.scoring import QD_OFFSETS, WALKER_LOSS, scalar_loss
-from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.genome import random_genomes
+from linkevo.sim.linkage.evaluation import Evaluation
+from linkevo.sim.linkage.genome import random_genomes
 from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES, evaluated_fitness
 
 
@@ -24,7 +24,7 @@ class Optimizer(Protocol):
 
     @property
     def eval_fitness(self) -> str:
-        """The `sim.evaluating` fitness name the evaluator must use."""
+        """The `sim.linkage.evaluating` fitness name the evaluator must use."""
         ...
 
     @property
@@ -136,7 +136,7 @@ class BaseOptimizer:
 
     @property
     def eval_fitness(self) -> str:
-        """The `sim.evaluating` fitness name: the two-objective variant for NSGA-II."""
+        """The `sim.linkage.evaluating` fitness name: the two-objective variant for NSGA-II."""
         return evaluated_fitness(self.fitness, self.multi_objective)
 
     @property

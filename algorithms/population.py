@@ -8,13 +8,13 @@ from linkevo.algorithms import scoring
 from linkevo.algorithms.archive import elite_rows
 from linkevo.algorithms.individuals import Individuals
 from linkevo.algorithms.optimizer import BaseOptimizer
-from linkevo.sim.descriptors import (
+from linkevo.sim.linkage.descriptors import (
     DESCRIPTOR_SPACES,
     bin_descriptors,
     cell_index,
     check_coverage_space,
 )
-from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.linkage.evaluation import Evaluation
 
 
 class PopulationOptimizer(BaseOptimizer):

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from linkevo.algorithms.map_elites import MapElites
-from linkevo.sim.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
-from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.linkage.descriptors import COVERAGE_SPACES, DESCRIPTOR_SPACES
+from linkevo.sim.linkage.evaluation import Evaluation
 
 
 class RandomSampling(MapElites):

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 from ribs.archives import GridArchive
 
-from linkevo.sim.descriptors import DescriptorSpace, bin_descriptors, cell_index
+from linkevo.sim.linkage.descriptors import DescriptorSpace, bin_descriptors, cell_index
 
 
 class PublishedGrid(GridArchive):
-    """A pyribs `GridArchive` whose cells are the study's bins (`sim.descriptors`).
+    """A pyribs `GridArchive` whose cells are the study's bins (`sim.linkage.descriptors`).
 
     pyribs bins a value v of a dimension with R cells over [lo, hi] as
     floor(R (v - lo) / (hi - lo) + eps); the study bins it as #{i in 1..R-1 : v > i*step},

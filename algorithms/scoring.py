@@ -11,7 +11,7 @@ F_p and F_sl: above the worst loss of 5,000 random genomes in either mode (F_p: 
 811 legacy; F_sl: 39 paper, 173 legacy), so the terms stay positive; one value per fitness
 for every approach so scores compare. F_w: 0, so a cell adds the distance its leg walks
 forwards on the worse floor without breaking and nothing else (the walking QD-score, in
-cm; `sim.walk_fitness`).
+cm; `sim.robot.walk_fitness`).
 """
 HV_REFERENCES: dict[str, tuple[float, float]] = {
     "Fp2": (600.0, 600.0),
@@ -23,7 +23,7 @@ losses: Fp2 (330, 273) paper / (516, 435) legacy; Fsl2 (39, 39) / (184, 130)); f
 area of (flat, carpet) distances dominated by legs that walk forwards on both (cm²)."""
 WALKER_LOSS = -50.0
 """An F_w loss at or below this is a walker: 50 cm or more on both floors in 10 s, without
-breaking (`sim.walk_fitness.WALKER_CM`)."""
+breaking (`sim.robot.walk_fitness.WALKER_CM`)."""
 
 
 def coverage(filled: int, n_cells: int) -> float:

@@ -1,5 +1,5 @@
 """Provides the learned walk model: per floor, the distance a leg walks in 10 s and whether
-its robot breaks, predicted from `sim.walk_features` (no physics), with a spread.
+its robot breaks, predicted from `sim.robot.walk_features` (no physics), with a spread.
 
 The model is an ensemble of `MEMBERS` small multilayer perceptrons (torch), each trained
 from its own seed on its own bootstrap sample of the walks; the ensemble's mean is the
@@ -21,10 +21,10 @@ import torch
 from torch import nn
 
 from linkevo.algorithms.aurora_model import torch_threads
-from linkevo.sim.walk_features import TARGET_FLOORS
+from linkevo.sim.robot.walk_features import TARGET_FLOORS
 
 FLOORS = TARGET_FLOORS
-"""The floors of the model's outputs, in order (`sim.walk_features.walk_targets`')."""
+"""The floors of the model's outputs, in order (`sim.robot.walk_features.walk_targets`')."""
 MEMBERS = 5
 """Networks in the ensemble."""
 HIDDEN: tuple[int, ...] = (128, 64)

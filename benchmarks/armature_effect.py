@@ -3,12 +3,12 @@
 Run: `.venv/bin/python benchmarks/armature_effect.py --run-id RUN_ID [--tracking-uri URI]
 [--cells 8]`: RUN_ID is a repertoire trial (the benchmark's: MAP-LIS/Fp/02 of the
 paper-mode study grid). The same `--cells` buildable cells (every k-th by loss), as LEGO
-legs, are walked 10 s on each floor with the walk-map walk (`sim.walk_map.
+legs, are walked 10 s on each floor with the walk-map walk (`sim.robot.walk_map.
 walk_map_settings`) three ways: the lean model's armature as shipped
-(`sim.lean_model.CONTACT_INERTIA_KG` on each coupled part's slides, times (5 cm)^2 on its
+(`sim.robot.lean_model.CONTACT_INERTIA_KG` on each coupled part's slides, times (5 cm)^2 on its
 hinge), a tenth of it, and none. Per leg it prints the armature's inertia reflected to the
 crank through the leg's kinematics over the turn (mean and largest, against the motor's
-rotor inertia at the crank, `sim.robot.Motor.armature`), and per floor and setting the
+rotor inertia at the crank, `sim.robot.hexapod.Motor.armature`), and per floor and setting the
 distances' median and largest difference from the shipped setting, and the break verdicts
 that change.
 """
@@ -22,12 +22,12 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.orchestrator.walkmap import Selection
-from linkevo.sim import lean_model
-from linkevo.sim.leg import leg_from_genome
-from linkevo.sim.robot import FLOORS, UNIT_M, Motor
-from linkevo.sim.robot_model import floor_reach
-from linkevo.sim.walk_map import walk_map_settings
-from linkevo.sim.walking import walk
+from linkevo.sim.robot import lean_model
+from linkevo.sim.robot.hexapod import FLOORS, UNIT_M, Motor
+from linkevo.sim.robot.leg import leg_from_genome
+from linkevo.sim.robot.model import floor_reach
+from linkevo.sim.robot.walk_map import walk_map_settings
+from linkevo.sim.robot.walking import walk
 from linkevo.workers.store.runs import RunStore
 
 SHIPPED = lean_model.CONTACT_INERTIA_KG

@@ -8,7 +8,7 @@ Run from the repository root:
 Prints three measurements:
 1. one trial's evaluation throughput (batch 5,000) in process (`LocalEvaluator`, 1 and 2
    numba threads, how a trial evaluates by default) and through 1 and 2 one-CPU evaluator
-   actors, with the plain per-linkage reference `sim.reference.evaluate_reference`
+   actors, with the plain per-linkage reference `sim.linkage.reference.evaluate_reference`
    measured in the same run as the baseline;
 2. the MLflow overhead per iteration at batch 5,000: the same EA trial through
    `workers.trial.run_trial` in process, untracked and with an MLflow recorder on a fresh
@@ -35,7 +35,7 @@ from trees import tree_env  # benchmarks/trees.py, beside this script
 
 from linkevo.orchestrator.launch_checks import trial_specs
 from linkevo.sim import named_target, random_genomes
-from linkevo.sim.reference import evaluate_reference
+from linkevo.sim.linkage.reference import evaluate_reference
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.ray_evaluator import ActorPoolEvaluator
 from linkevo.workers.recorders import NullRecorder
@@ -103,7 +103,7 @@ def actor_scaling(genomes: np.ndarray) -> None:
     evaluate_reference(few, "Fp", target=named_target("D16"))
     reference_rate = len(few) / (time.perf_counter() - start)
     print(f"## 1. evaluation throughput, batch {len(genomes)} (best of {REPEATS}, alternating)")
-    print(f"plain reference (sim.reference, 1 linkage at a time): {reference_rate:12,.0f} eval/s")
+    print(f"plain reference (sim.linkage.reference, one at a time): {reference_rate:12,.0f} eval/s")
     print(f"in-process LocalEvaluator, 1 numba thread:           {rate['thread1']:12,.0f} eval/s")
     print(f"in-process LocalEvaluator, 2 numba threads:          {rate['thread2']:12,.0f} eval/s")
     print(f"1 evaluator actor (1 CPU):                           {rate['actor1']:12,.0f} eval/s")

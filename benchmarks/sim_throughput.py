@@ -31,10 +31,10 @@ import time
 import numba
 import numpy as np
 
-from linkevo.sim.evaluating import evaluate
-from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.genome import random_genomes
-from linkevo.sim.reference import evaluate_reference
+from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.evaluation import Evaluation
+from linkevo.sim.linkage.genome import random_genomes
+from linkevo.sim.linkage.reference import evaluate_reference
 
 
 def main() -> None:

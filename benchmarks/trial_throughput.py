@@ -15,7 +15,7 @@ Plain references, measured in the same run:
    standard sort on DEAP individuals; for MAP-Elites a per-child Python dict archive),
    against our vectorised `select_nsga2` and the pyribs archive `GridArchive.add` on the
    same data;
-2. evaluation: the plain per-linkage `sim.reference.evaluate_reference` on 100 genomes,
+2. evaluation: the plain per-linkage `sim.linkage.reference.evaluate_reference` on 100 genomes,
    extrapolated to the trial's budget, against the trial's whole wall time.
 """
 
@@ -31,7 +31,7 @@ from deap import base, creator, tools
 
 from linkevo.algorithms import GridArchive, Individuals, select_nsga2
 from linkevo.sim import DESCRIPTOR_SPACES, evaluate, random_genomes
-from linkevo.sim.reference import evaluate_reference
+from linkevo.sim.linkage.reference import evaluate_reference
 from linkevo.sim.study import STUDY_EVALUATIONS
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder

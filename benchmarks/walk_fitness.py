@@ -6,10 +6,10 @@ Run: `.venv/bin/python benchmarks/walk_fitness.py [--against TREE] [--walks 200]
 
 1. **Core-seconds per walked candidate.** One MAP-LIS F_w trial (`--walks` walked
    candidates, seed 1) runs on one core; its walk log (`walks.parquet`) says what each
-   candidate it walked cost there: the search's path (`sim.walk_fitness.walk_candidate`:
+   candidate it walked cost there: the search's path (`sim.robot.walk_fitness.walk_candidate`:
    the LEGO build, carpet, and flat unless the robot broke or carpet alone keeps it out
    of the archive, each walk stopped at its break). The same candidates then go through
-   the walk map's path (`sim.walk_map.build_cells` and `walk_legs`: the build and a 10-s
+   the walk map's path (`sim.robot.walk_map.build_cells` and `walk_legs`: the build and a 10-s
    walk on both floors, each distinct leg once), in a fresh process on one core (process
    CPU time, the layer plans' cache cleared). With `--against TREE` (another checkout,
    `git worktree add ../base REV`) TREE's walk-map path is timed too: the path as it was
@@ -38,8 +38,8 @@ HERE = Path(__file__).resolve().parent
 MAP_PATH = """
 import json, sys, time
 import numpy as np
-from linkevo.sim.layers import _colouring
-from linkevo.sim.walk_map import CellBatch, LegBatch, build_cells, group_legs, walk_legs
+from linkevo.sim.robot.layers import _colouring
+from linkevo.sim.robot.walk_map import CellBatch, LegBatch, build_cells, group_legs, walk_legs
 genomes = np.load(sys.argv[1])
 _colouring.cache_clear()
 start = time.process_time()

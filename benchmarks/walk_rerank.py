@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.walk_map import CellBatch, walk_cells
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.robot.walk_map import CellBatch, walk_cells
 from linkevo.workers.evaluators import LocalEvaluator
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.trial import run_trial

@@ -5,9 +5,9 @@ Run: `.venv/bin/python benchmarks/walk_speed.py` (options: --linkage FILE.json, 
 default `benchmarks/walk_linkage.json`, the first robot of MAP-LIS in the paper-mode study
 grid (`linkevo hexapod study`). The process is pinned to one core.
 
-Per floor and robot model (`sim.walking.MODELS`: `lean`, the default, and `full`), each the
+Per floor and robot model (`sim.robot.walking.MODELS`: `lean`, the default, and `full`), each the
 best of `--repeats` runs, simulated seconds per wall second:
-- **walk**: `sim.walking.walk` as `linkevo hexapod simulate` runs it: model built, settled,
+- **walk**: `sim.robot.walking.walk` as `linkevo hexapod simulate` runs it: model built, settled,
   then the gait's controller, the motors and the records a builder reads (pin statics
   included);
 - **ceiling**: the same model stepped for the same time in control ticks with constant
@@ -38,10 +38,10 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from linkevo.sim.leg import leg_from_genome
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.robot import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG
-from linkevo.sim.walking import MODELS, WalkSettings, walk
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.robot.hexapod import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG
+from linkevo.sim.robot.leg import leg_from_genome
+from linkevo.sim.robot.walking import MODELS, WalkSettings, walk
 
 DEFAULT_LINKAGE = Path(__file__).with_name("walk_linkage.json")
 
@@ -112,12 +112,12 @@ def main() -> None:
 
 TIMED_WALK = """
 import json, sys, time
-from linkevo.sim.leg import leg_from_genome
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.robot import FLOORS
+from linkevo.sim.robot.leg import leg_from_genome
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.robot.hexapod import FLOORS
 try:
-    from linkevo.sim.walking import WalkSettings, walk
-except ImportError:  # a tree from before sim/walk.py was named sim/walking.py
+    from linkevo.sim.robot.walking import WalkSettings, walk
+except ImportError:  # a tree from before sim/walk.py was named sim/robot/walking.py
     from linkevo.sim.walk import WalkSettings, walk
 linkage, floor, model, seconds = sys.argv[1], sys.argv[2], sys.argv[3], float(sys.argv[4])
 leg = leg_from_genome(*from_document(json.load(open(linkage))))

@@ -4,10 +4,10 @@ Run: `.venv/bin/python benchmarks/walkmap_fidelity.py --run-id RUN_ID [--trackin
 [--cells 24]`: RUN_ID is a repertoire trial (the benchmark's: MAP-LIS's first robot's trial
 of the paper-mode study grid, `docs/results.md`). The same `--cells` buildable cells (every
 k-th by loss) are walked on each floor, on one core, four ways: the Table I protocol
-(`sim.walking.field_trials`: five 10-s walks from hand-placed starts at the lean model's 2-ms
+(`sim.robot.walking.field_trials`: five 10-s walks from hand-placed starts at the lean model's 2-ms
 step, their mean), one Table I walk from the unperturbed start, the walk-map walk
-(`sim.walk_map.walk_map_settings`: one walk at 4 ms with the sparse Jacobian), and the
-walking fitness's walk (`sim.walk_fitness.search_walk_settings`: the walk-map walk for 5 s,
+(`sim.robot.walk_map.walk_map_settings`: one walk at 4 ms with the sparse Jacobian), and the
+walking fitness's walk (`sim.robot.walk_fitness.search_walk_settings`: the walk-map walk for 5 s,
 stopped once the robot has broken, its distance doubled to 10 s). Per floor and way it
 prints the time per cell and its ratio to the protocol's, and the agreement with the
 protocol: Spearman's rank correlation of the distances (over every cell, and over the cells
@@ -27,11 +27,11 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from linkevo.orchestrator.walkmap import Selection
-from linkevo.sim.leg import leg_from_genome
-from linkevo.sim.robot import FLOORS
-from linkevo.sim.walk_fitness import search_walk_settings
-from linkevo.sim.walk_map import WALK_SECONDS, walk_map_settings
-from linkevo.sim.walking import WalkSettings, field_trials, walk
+from linkevo.sim.robot.hexapod import FLOORS
+from linkevo.sim.robot.leg import leg_from_genome
+from linkevo.sim.robot.walk_fitness import search_walk_settings
+from linkevo.sim.robot.walk_map import WALK_SECONDS, walk_map_settings
+from linkevo.sim.robot.walking import WalkSettings, field_trials, walk
 from linkevo.workers.store.runs import RunStore
 
 WAYS = ("Table I protocol (5 walks)", "one Table I walk", "walk-map walk", "F_w walk")

@@ -25,7 +25,7 @@ def main() -> None:
     args = parser.parse_args()
     from linkevo.algorithms.walk_model import WalkModel
     from linkevo.orchestrator.walkmodel import figures, pooled, walked_repertoires
-    from linkevo.sim.walk_features import FEATURE_NAMES
+    from linkevo.sim.robot.walk_features import FEATURE_NAMES
     from linkevo.workers.store.runs import RunStore
 
     repertoires = walked_repertoires(RunStore.open(args.tracking_uri), args.refs)

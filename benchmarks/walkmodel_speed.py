@@ -4,12 +4,12 @@ Run: `.venv/bin/python benchmarks/walkmodel_speed.py [--cells 10000] [--sample 2
 
 A repertoire of `--cells` random genomes that pass the 2-D checks (paper mode) is predicted
 on one core by a walk model fitted on walks of the same kind (its size is what a trained
-model has; its weights do not change its speed): `sim.walk_features` (each cell's LEGO
-build found by `sim.builds`, the 2-D kernel's simulation of it, its checks and tripod gait)
+model has; its weights do not change its speed): `sim.robot.walk_features` (each cell's LEGO
+build found by `sim.robot.builds`, the 2-D kernel's simulation of it, its checks and tripod gait)
 plus the ensemble's forward pass, process CPU time, best of 3. In the same run: the builds
-alone, against `sim.lego.whole_module_build` (the exhaustive search `linkevo pull` uses)
+alone, against `sim.robot.lego.whole_module_build` (the exhaustive search `linkevo pull` uses)
 on `--sample` of the cells; and the walk map's cost: `--sample` cells built and walked 10 s
-on both floors (`sim.walk_map.walk_cells`), per cell, times `--cells`.
+on both floors (`sim.robot.walk_map.walk_cells`), per cell, times `--cells`.
 Goal: <= 2 s for 10,000 cells, build features included.
 """
 
@@ -34,11 +34,11 @@ def main() -> None:
     numba.set_num_threads(1)
     from linkevo.algorithms.walk_model import WalkData, WalkModel
     from linkevo.sim import decode, simulate
-    from linkevo.sim.builds import lego_builds
-    from linkevo.sim.lego import QuantiseError, whole_module_build
-    from linkevo.sim.physical import physical_checks
-    from linkevo.sim.walk_features import FEATURE_NAMES, walk_features
-    from linkevo.sim.walk_map import CellBatch, walk_cells
+    from linkevo.sim.linkage.physical import physical_checks
+    from linkevo.sim.robot.builds import lego_builds
+    from linkevo.sim.robot.lego import QuantiseError, whole_module_build
+    from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features
+    from linkevo.sim.robot.walk_map import CellBatch, walk_cells
 
     rng = np.random.default_rng(0)
     kept = []

@@ -1,5 +1,5 @@
 """Provides the robot's side of the tripod gait: leg phases from motor positions, and
-PhaseController, which runs the gait's PID (`sim.gait`) in motor units.
+PhaseController, which runs the gait's PID (`sim.robot.gait`) in motor units.
 
 Leg i's phase is `theta_i = 2*pi * ((d_i * (p_i - z_i)) mod 4096) / 4096`, where `p_i` is
 the motor's signed multi-turn Present Position, `z_i` its calibrated zero and `d_i` its
@@ -13,7 +13,7 @@ import numpy as np
 
 from linkevo.hardware.config import GaitConfig, MotorConfig
 from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN, VELOCITY_RPM_PER_UNIT
-from linkevo.sim.gait import TWO_PI, PhasePid, wrap
+from linkevo.sim.robot.gait import TWO_PI, PhasePid, wrap
 
 __all__ = ["PhaseController", "alignment_goals", "leg_phase", "phase_separation", "wrap"]
 
@@ -39,7 +39,7 @@ def alignment_goals(motors: tuple[MotorConfig, ...]) -> np.ndarray:
 
 
 class PhaseController:
-    """The robot's side of the gait: `sim.gait.PhasePid` on phases read from Present
+    """The robot's side of the gait: `sim.robot.gait.PhasePid` on phases read from Present
     Position, its leg speeds turned into Goal Velocity units in each motor's frame.
 
     Args:

@@ -4,11 +4,11 @@
 pseudo-terminal, the gait's PID, the safety monitor) against `hardware.emulator.BusEmulator`
 whose motors are `PhysicsMotor`s: what the driver writes (torque, operating mode, Goal
 Velocity or Goal Position) drives the crank of the motor's leg in MuJoCo (the lean robot
-model, `sim.lean_model`), stepped in real time, and what it reads (Present Position,
+model, `sim.robot.lean_model`), stepped in real time, and what it reads (Present Position,
 Velocity and Load) comes from the physics. A leg that cannot carry the robot loads its
 motor to the torque limit, so the driver's overload policy trips as it would on the robot.
 
-Each motor drives the leg its config `name` names (`sim.robot.LEG_SLOTS`); the robot is set
+Each motor drives the leg its config `name` names (`sim.robot.hexapod.LEG_SLOTS`); the robot is set
 down with every leg at its phase offset, as a builder sets it down aligned. Its Present
 Position is `zero + direction * phase * 4096 / 2pi`, the phase being the crank angle in the
 linkage's frame, as `hardware.gait.leg_phase` reads it back. With torque off the crank is
@@ -27,10 +27,10 @@ import numpy as np
 from linkevo.hardware import control_table as ct
 from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.emulated_motor import EmulatedMotor
-from linkevo.sim.lean_model import build_lean_robot
-from linkevo.sim.leg import Leg
-from linkevo.sim.robot import LEG_SLOTS, Floor, Frame, Motor
-from linkevo.sim.robot_model import control_tick
+from linkevo.sim.robot.hexapod import LEG_SLOTS, Floor, Frame, Motor
+from linkevo.sim.robot.lean_model import build_lean_robot
+from linkevo.sim.robot.leg import Leg
+from linkevo.sim.robot.model import control_tick
 
 HOLDING_NM = 0.5
 """Torque the gearbox of a motor with torque off holds before it back-drives (estimate)."""
@@ -47,7 +47,7 @@ class PhysicsWorld:
     Args:
         config: the robot config (its motors' names are the slots they drive).
         leg: the leg linkage on every slot.
-        floor: the floor (`sim.robot.FLOORS`), its contact as the config's `physics` says.
+        floor: the floor (`sim.robot.hexapod.FLOORS`), its contact as the config's `physics` says.
         frame, motor: the chassis and the motor model (defaults: the config's `physics`).
     """
 

@@ -2,7 +2,7 @@
 recorded field trials (`linkevo hexapod trial`), with a held-out error by
 cross-validation, written as a robot config every command takes (`--config`).
 
-What is fitted: any of the `[physics]` parameters (`sim.robot.PHYSICS_KEYS`) and the
+What is fitted: any of the `[physics]` parameters (`sim.robot.hexapod.PHYSICS_KEYS`) and the
 gait's speed and gains (`GAIT_KEYS`). The loss is the mean squared difference, in cm²,
 between each trial's measured mean distance and the distance the simulator walks the
 same linkage on the same floor for the same seconds (the lean model, one walk from the
@@ -29,11 +29,11 @@ from linkevo.hardware.config import RobotConfig
 from linkevo.hardware.field_trial import REAL
 from linkevo.orchestrator.simulated_trials import gait_of
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.gait import GaitConfig
-from linkevo.sim.leg import leg_from_genome
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.robot import PHYSICS_KEYS, Physics, floor
-from linkevo.sim.walking import WalkSettings, walk
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.robot.gait import GaitConfig
+from linkevo.sim.robot.hexapod import PHYSICS_KEYS, Physics, floor
+from linkevo.sim.robot.leg import leg_from_genome
+from linkevo.sim.robot.walking import WalkSettings, walk
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import read_document
 

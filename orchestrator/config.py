@@ -12,7 +12,7 @@ from typing import Any
 
 from linkevo.orchestrator.config_text import apply_overrides
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.robot import PHYSICS_KEYS, Physics
+from linkevo.sim.robot.hexapod import PHYSICS_KEYS, Physics
 from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
@@ -56,7 +56,7 @@ archive (the study runs 146)."""
 BATCH_COPIES = 4
 """Copies of a batch a trial holds at once (its genomes and evaluation in the trial, the
 evaluator and Ray's object store): the memory a batch needs is this many times
-`sim.evaluation.evaluation_bytes`."""
+`sim.linkage.evaluation.evaluation_bytes`."""
 MEMORY_SHARE = 0.5
 """The share of this machine's memory one trial's batch may need."""
 EXECUTION_KEYS: frozenset[str] = frozenset(
@@ -103,7 +103,7 @@ class GridConfig:
             (`workers.trial`, docs/walking.md); 0 (the default) walks none. Path
             fitnesses only.
         walks: the budget of each walking trial (fitness "Fw"): candidates walked on the
-            simulated robot (`sim.walk_fitness`), >= 1 when "Fw" is among `fitnesses`,
+            simulated robot (`sim.robot.walk_fitness`), >= 1 when "Fw" is among `fitnesses`,
             else 0. `evaluations` does not apply to them (their guard is
             `sim.study.CANDIDATES_PER_WALK` candidates per walk).
         walk_batch: candidates per iteration (and initial population) of a walking
@@ -116,7 +116,7 @@ class GridConfig:
             model, fitted on each trial's walks as it goes, predicts could enter or improve
             the archive (`workers.walk_surrogate`); false (the default) walks every one.
         physics: the simulated robot's parameters that differ from the study's robot
-            (`sim.robot.Physics`; a `[physics]` table, as the robot config's, e.g. the
+            (`sim.robot.hexapod.Physics`; a `[physics]` table, as the robot config's, e.g. the
             one `linkevo hexapod calibrate` writes), for every walk of the grid's trials
             (fitness F_w, `walk_rerank`); empty (the default): the study's robot.
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
@@ -232,7 +232,7 @@ def machine_memory() -> int:
 def _check_size(cfg: GridConfig) -> None:
     """Refuses a budget or batch this machine cannot hold (`MAX_ITERATIONS`,
     `BATCH_COPIES`, `MEMORY_SHARE`), so a dry run catches it too."""
-    from linkevo.sim.evaluation import evaluation_bytes
+    from linkevo.sim.linkage.evaluation import evaluation_bytes
 
     if cfg.evaluations > cfg.batch_size * MAX_ITERATIONS:
         raise _fail(

@@ -3,7 +3,7 @@ a design (`linkevo explore RUN_ID|GRID_ID`).
 
 The page shows a repertoire as a heatmap of loss (4-D maps folded into 2-D tiles, the
 folding chosen on the page), each cell's linkage with its animated foot path, loss,
-descriptors and physical checks (`sim.physical`), filters on the checks, a build sheet and
+descriptors and physical checks (`sim.linkage.physical`), filters on the checks, a build sheet and
 the `linkevo pull RUN_ID:CELL` command for a clicked cell, and two pinned cells side by
 side. Where the trial has a walk map (`linkevo walkmap`), the map can be coloured by the
 distance the simulated robot walks on a floor, filtered on "walks at least" and "does not
@@ -35,10 +35,10 @@ import pandas as pd
 
 from linkevo.orchestrator.pull import own_modules
 from linkevo.sim import decode, simulate
-from linkevo.sim.decoding import BEAM_KINDS, NODE_KINDS
-from linkevo.sim.linkage_doc import DEFAULT_UNIT_MM, json_floats
-from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
-from linkevo.sim.robot import in_floor_order
+from linkevo.sim.linkage.decoding import BEAM_KINDS, NODE_KINDS
+from linkevo.sim.linkage.linkage_doc import DEFAULT_UNIT_MM, json_floats
+from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from linkevo.sim.robot.hexapod import in_floor_order
 from linkevo.sim.study import FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
@@ -210,7 +210,7 @@ def _predicted(predicted: pd.DataFrame | None) -> dict[tuple[int, str], list]:
 
 def walk_seconds(walks: pd.DataFrame | None) -> float | None:
     """Returns how long a walk map's walks are (s): a `linkevo walkmap` walks 10 s (or its
-    --seconds), a walking trial's search walks `sim.walk_fitness.SEARCH_SECONDS`; None
+    --seconds), a walking trial's search walks `sim.robot.walk_fitness.SEARCH_SECONDS`; None
     without a walk map."""
     if walks is None or walks.empty:
         return None

@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.sim.linkage_doc import from_document, json_floats, to_document
-from linkevo.sim.physical import TOGGLE_DEG
-from linkevo.sim.robot import in_floor_order
+from linkevo.sim.linkage.linkage_doc import from_document, json_floats, to_document
+from linkevo.sim.linkage.physical import TOGGLE_DEG
+from linkevo.sim.robot.hexapod import in_floor_order
 from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES, WALKING_FITNESS
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
@@ -48,8 +48,8 @@ def build_sheet(
 
     A straight Technic beam with h holes spans h - 1 modules between its end holes, so a
     link of M modules is built from a beam with M + 1 holes. `modules` are the LEGO
-    build's lengths (`sim.lego.quantise`, one per beam); without them each beam is
-    rounded on its own (at least 1 module). `layers` are the beams' layers (`sim.layers`),
+    build's lengths (`sim.robot.lego.quantise`, one per beam); without them each beam is
+    rounded on its own (at least 1 module). `layers` are the beams' layers (`sim.robot.layers`),
     0 next to the frame; blank without them.
     """
     unit_mm = float(document["units"]["unit_mm"])
@@ -123,7 +123,7 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
 
 
 def checks_line(checks: dict) -> str:
-    """Returns the physical checks of a linkage document (`sim.physical`) in one sentence."""
+    """Returns the physical checks of a linkage document (`sim.linkage.physical`) in one sentence."""
     verdict = "buildable" if checks["buildable"] else "NOT buildable as simulated"
     turn = "turns fully" if checks["turns_fully"] else "does not turn fully"
     if checks["max_stretch"] is None:
@@ -167,7 +167,7 @@ def assembly_lines(doc: dict, rows: list[dict]) -> list[str]:
 
 
 def lego_line(lego: dict) -> str:
-    """Returns the LEGO build (`sim.lego.quantise`) of a pulled document in one paragraph."""
+    """Returns the LEGO build (`sim.robot.lego.quantise`) of a pulled document in one paragraph."""
     if "refused" in lego:
         return f"LEGO build: none ({lego['refused']}); the table rounds each beam on its own."
     return (
@@ -181,8 +181,8 @@ def lego_line(lego: dict) -> str:
 
 def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     """Returns the LEGO build of a linkage as JSON-able values, or why there is none."""
-    from linkevo.sim.layers import layer_plan
-    from linkevo.sim.lego import QuantiseError, quantise
+    from linkevo.sim.robot.layers import layer_plan
+    from linkevo.sim.robot.lego import QuantiseError, quantise
 
     fitness = fitness if fitness in STUDY_FITNESSES else STUDY_FITNESSES[0]  # F_w: F_p
     try:

@@ -1,5 +1,5 @@
 """Provides simulated field trials: a tracked or pulled linkage walked on the 3-D robot
-(`sim.walking`) with the real robot's gait from its config, summarised as Table I reads it,
+(`sim.robot.walking`) with the real robot's gait from its config, summarised as Table I reads it,
 and logged as a field trial marked `simulated=physics`."""
 
 from __future__ import annotations
@@ -9,11 +9,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.hardware.field_trial import PHYSICS, log_field_trial
-from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.linkage_doc import DocumentError, from_document
-from linkevo.sim.robot import LEG_SLOTS
-from linkevo.sim.walk_figures import summary
-from linkevo.sim.walking import Walk, WalkSettings, field_trials
+from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
+from linkevo.sim.robot.hexapod import LEG_SLOTS
+from linkevo.sim.robot.leg import LegError, leg_from_genome
+from linkevo.sim.robot.walk_figures import summary
+from linkevo.sim.robot.walking import Walk, WalkSettings, field_trials
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.linkages import SourceLinkage
 
@@ -42,7 +42,7 @@ FIGURES = (
 
 def gait_of(config: RobotConfig) -> tuple[object, dict[str, float]]:
     """Returns the robot's gait and each slot's phase offset in degrees, from its motors'
-    names (`sim.robot.LEG_SLOTS`).
+    names (`sim.robot.hexapod.LEG_SLOTS`).
 
     Raises:
         ValueError: when the motors' names are not the six slots.
@@ -90,9 +90,9 @@ def simulate_source(
     model: str = "lean",
 ) -> tuple[dict, list[Walk]]:
     """Walks the source's linkage `repeats` times on the floor and returns the summary
-    (`sim.walking.summary`, with how the leg was built and the robot model, `sim.walking.MODELS`)
-    and the walks; a linkage that does not turn comes back as `breaks` with no distances
-    and no walks."""
+    (`sim.robot.walking.summary`, with how the leg was built and the robot model,
+    `sim.robot.walking.MODELS`) and the walks; a linkage that does not turn comes back as `breaks`
+    with no distances and no walks."""
     genome, mode = from_document(source.document)
     gait, offsets = gait_of(config)
     where = config.physics.floor(floor_name)

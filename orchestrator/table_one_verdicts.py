@@ -28,7 +28,7 @@ from linkevo.orchestrator.report.verdicts import (
     REPRODUCED,
     weakest,
 )
-from linkevo.sim.robot import FLOORS, ROBOT_MODELS
+from linkevo.sim.robot.hexapod import FLOORS, ROBOT_MODELS
 
 WALK_CM = 10.0
 """A robot walks when it moves forward more than this in the walk without breaking: a

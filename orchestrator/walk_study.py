@@ -30,9 +30,9 @@ import pandas as pd
 from linkevo.hardware.config import RobotConfig
 from linkevo.orchestrator.simulated_trials import log_simulated, simulate_source
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.linkage_doc import to_document
-from linkevo.sim.robot import FLAT, FLOORS, ROBOT_MODELS
+from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.robot.hexapod import FLAT, FLOORS, ROBOT_MODELS
+from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.sim.study import MAP_ELITES
 from linkevo.workers.plots.repertoire import select_paths
 from linkevo.workers.store import run_layout as layout

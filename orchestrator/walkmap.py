@@ -1,9 +1,9 @@
 """Provides `walk_map`: every chosen cell of a repertoire walked on the simulated robot,
 on each floor, fanned out over Ray (`linkevo walkmap`) in two steps: the cells' legs built
 in batches of cells, then each distinct leg walked once, in batches of legs
-(`sim.walk_map`).
+(`sim.robot.walk_map`).
 
-The result is the trial's `walkmap.parquet` (a row per cell and floor: `sim.walk_map.COLUMNS`
+The result is the trial's `walkmap.parquet` (a row per cell and floor: `sim.robot.walk_map.COLUMNS`
 and the cell's bins) and `walkmap.png` (distance per cell, a panel per floor), logged to
 the trial's run. Rows are logged as they come, every `CHECKPOINT_S`, so `--resume` after an
 interruption walks only what is missing (and what failed).
@@ -25,10 +25,10 @@ import pandas as pd
 
 from linkevo.sim import decode, simulate
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.physical import physical_checks
-from linkevo.sim.robot import Physics
-from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_map_frame
-from linkevo.sim.walk_map import walk_rows as _walk_rows
+from linkevo.sim.linkage.physical import physical_checks
+from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.walk_map import COLUMNS, CellBatch, walk_map_frame
+from linkevo.sim.robot.walk_map import walk_rows as _walk_rows
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 from linkevo.workers.store.runs import RunStore, TrialRun
@@ -123,7 +123,7 @@ Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
 def walk_rows(
     run: Runner, batches: list[CellBatch], seconds: float, physics: Physics | None = None
 ) -> Iterator[tuple[int, list[dict]]]:
-    """`sim.walk_map.walk_rows` in tasks of `BATCH_LEGS` distinct legs: yields, as each
+    """`sim.robot.walk_map.walk_rows` in tasks of `BATCH_LEGS` distinct legs: yields, as each
     task ends, how many cells it built and the rows it settled."""
     return _walk_rows(run, batches, seconds, BATCH_LEGS, physics)
 
@@ -217,7 +217,7 @@ def physics_tag(physics: Physics) -> str:
 
 @dataclass(frozen=True)
 class WalkMapResult:
-    """A walk map as logged: its rows (`sim.walk_map.COLUMNS` and the cells' bins), and
+    """A walk map as logged: its rows (`sim.robot.walk_map.COLUMNS` and the cells' bins), and
     whether this call walked anything (False: the map was complete already)."""
 
     frame: pd.DataFrame

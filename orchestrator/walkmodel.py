@@ -4,7 +4,7 @@ as an MLflow run of its own kind (`walk_model`), and whole repertoires predicted
 beside their walk maps as `walkpred.parquet`.
 
 Training data are the rows of walk maps (`linkevo walkmap`, or a walking trial's own):
-`sim.walk_features.walk_targets` of every walked cell.
+`sim.robot.walk_features.walk_targets` of every walked cell.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import pandas as pd
 
 from linkevo.algorithms.walk_model import FLOORS, Prediction, WalkData, WalkModel
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.walk_features import (
+from linkevo.sim.robot.walk_features import (
     FEATURE_NAMES,
     FEATURES_VERSION,
     walk_features,
@@ -199,7 +199,7 @@ def log_model(store: RunStore, fitted: FittedModel, refs: list[str], seed: int) 
     description = {
         "features": {"version": FEATURES_VERSION, "names": list(FEATURE_NAMES)},
         "floors": list(FLOORS),
-        "target": "cm walked in 10 s (credited, sim.walk_fitness.credited_cm); breaks",
+        "target": "cm walked in 10 s (credited, sim.robot.walk_fitness.credited_cm); breaks",
         "sources": refs,
         "trained_on": [t.run_id for t in fitted.trained_on],
         "held_out": [t.run_id for t in fitted.held_out],

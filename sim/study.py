@@ -45,7 +45,7 @@ class Fitness:
         name: the spelling in configs, tags and tables ("Fp").
         label: the spelling in figures ("F_p").
         two_objective: the variant a multi-objective approach evaluates ("Fp2").
-        walks: the loss comes from walking the robot (`sim.walk_fitness`), not from the
+        walks: the loss comes from walking the robot (`sim.robot.walk_fitness`), not from the
             2-D kernel; its budget is walked candidates.
     """
 
@@ -95,7 +95,7 @@ PATH_FITNESSES: tuple[str, ...] = (
     *(f.name for f in FITNESS_TABLE if not f.walks),
     *(f.two_objective for f in FITNESS_TABLE if not f.walks),
 )
-"""The fitnesses of the foot path that `sim.evaluating` computes ("Fp", "Fsl", "Fp2",
+"""The fitnesses of the foot path that `sim.linkage.evaluating` computes ("Fp", "Fsl", "Fp2",
 "Fsl2")."""
 WALKING_FITNESS = "Fw"
 """The walking fitness: a trial's loss from its candidates walked on the robot."""
@@ -151,8 +151,8 @@ def is_pareto(approach: str) -> bool:
 
 
 def evaluated_fitness(fitness: str, multi_objective: bool) -> str:
-    """Returns the `sim.evaluating` fitness behind `fitness`: its two-objective variant for a
-    multi-objective approach, else itself."""
+    """Returns the `sim.linkage.evaluating` fitness behind `fitness`: its two-objective variant for
+    a multi-objective approach, else itself."""
     return FITNESS[fitness].two_objective if multi_objective else fitness
 
 

@@ -7,10 +7,10 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from linkevo.sim.evaluating import evaluate
-from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.fitness import N_OBJECTIVES
-from linkevo.sim.robot import Physics
+from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.evaluation import Evaluation
+from linkevo.sim.linkage.fitness import N_OBJECTIVES
+from linkevo.sim.robot.hexapod import Physics
 from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.result_pool import ResultPool
 from linkevo.workers.trial_spec import resolve_target
@@ -123,13 +123,13 @@ def make_evaluator(
 
 
 class LocalEvaluator(Stateless):
-    """Evaluates in this process with `sim.evaluating` (numba threads over the batch).
+    """Evaluates in this process with `sim.linkage.evaluating` (numba threads over the batch).
 
     Results go into reused buffers (`workers.result_pool`): a buffer is written again
     only once none of its arrays is referenced, so results may be kept indefinitely.
 
     Args:
-        fitness: the `sim.evaluating` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
+        fitness: the `sim.linkage.evaluating` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
         mode: "paper" or "legacy".
         target: a published target name or a JSON target file.
         n_angles: crank angles per turn.

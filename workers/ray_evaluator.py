@@ -15,10 +15,10 @@ import ray
 from ray.util.placement_group import PlacementGroup
 from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
-from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.genome import validate_genomes
-from linkevo.sim.robot import Physics
-from linkevo.sim.walk_fitness import CandidateWalk, walk_candidate
+from linkevo.sim.linkage.evaluation import Evaluation
+from linkevo.sim.linkage.genome import validate_genomes
+from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.walk_fitness import CandidateWalk, walk_candidate
 from linkevo.workers.evaluators import Bar, LocalEvaluator, Pending, Stateless
 
 
@@ -50,7 +50,7 @@ class EvaluatorWorker:
     """Evaluates genome batches with fixed settings; runs as a Ray actor.
 
     Args:
-        fitness: the `sim.evaluating` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
+        fitness: the `sim.linkage.evaluating` fitness ("Fp", "Fsl", "Fp2", "Fsl2").
         mode: "paper" or "legacy".
         target: a published target name or a JSON target file.
         n_angles: crank angles per linkage.
@@ -72,7 +72,7 @@ class ActorPoolEvaluator(Stateless):
     """Evaluates a batch by splitting it by index across K evaluator actors.
 
     The batch is cut into K contiguous parts (one per actor), evaluated concurrently and
-    put back in order, so the result equals one in-process `sim.evaluating` call. Use
+    put back in order, so the result equals one in-process `sim.linkage.evaluating` call. Use
     `start` to create the actors; `close` (or the context manager) kills them.
 
     Args:
@@ -171,7 +171,7 @@ class WalkWorker:
     def walk(
         self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float, physics: Physics
     ) -> tuple[CandidateWalk, str]:
-        """Returns the candidate's walk (`sim.walk_fitness.walk_candidate`) and this
+        """Returns the candidate's walk (`sim.robot.walk_fitness.walk_candidate`) and this
         actor's Ray node."""
         node = ray.get_runtime_context().get_node_id()
         return walk_candidate(genome, mode, known, bar, physics=physics), node

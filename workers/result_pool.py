@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.linkage.evaluation import Evaluation
 
 KEEP = 4
 """Buffers a pool keeps; older ones are dropped (arrays still held stay valid)."""

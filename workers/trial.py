@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.algorithms import Optimizer
-from linkevo.sim.linkage_doc import to_document
-from linkevo.sim.path_diversity import path_diversity
+from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.linkage.path_diversity import path_diversity
 from linkevo.sim.study import (
     REPERTOIRE_APPROACHES,
 )
@@ -183,7 +183,7 @@ def run_trial(
     the end, atomically), then `repertoire.parquet` and `repertoire.png` (MAP-*,
     RANDOM) or `population.parquet` and `population.png`
     (EA, NSGA2), `best_linkage.json`, `best_linkage.png`, `encoder.pt` (MAP-AU) and
-    `result.json`; the final metric `path_diversity` (`sim.path_diversity`) goes to the
+    `result.json`; the final metric `path_diversity` (`sim.linkage.path_diversity`) goes to the
     recorder with the last iteration's step; finally it calls
     `recorder.log_artifacts(out_dir)`.
 

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.robot import Physics
+from linkevo.sim.robot.hexapod import Physics
 from linkevo.sim.study import (
     APPROACHES,
     CANDIDATES_PER_WALK,
@@ -31,7 +31,7 @@ from linkevo.sim.study import (
 
 if TYPE_CHECKING:
     from linkevo.algorithms import Optimizer
-    from linkevo.sim.fitness import Target
+    from linkevo.sim.linkage.fitness import Target
 
 
 class TrialSpecError(LinkevoError, ValueError):
@@ -63,7 +63,7 @@ class TrialSpec:
         walk_rerank: walk this many of the final lowest-loss linkages that pass the physical
             checks on the simulated robot (`workers.trial_walks.rerank_by_walking`); 0: none.
         walks: the budget of a walking trial (fitness "Fw"): candidates walked on the
-            physics (`sim.walk_fitness`); the trial ends once it has walked this many, or
+            physics (`sim.robot.walk_fitness`); the trial ends once it has walked this many, or
             after `evaluations` candidates, a guard (`CANDIDATES_PER_WALK` per walk when
             built with `walking`). 0 for the path fitnesses.
         seed_from: a walking MAP-Elites trial's warm start: the run id of an earlier
@@ -73,7 +73,7 @@ class TrialSpec:
             model, fitted on its walks as it goes, predicts could enter or improve its
             archive (`workers.walk_surrogate`).
         physics: the simulated robot's parameters that differ from the study's robot
-            (`sim.robot.Physics`), for every walk of the trial (F_w's, `walk_rerank`'s).
+            (`sim.robot.hexapod.Physics`), for every walk of the trial (F_w's, `walk_rerank`'s).
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -179,7 +179,7 @@ class TrialSpec:
 
     @property
     def eval_fitness(self) -> str:
-        """The `sim.evaluating` fitness the evaluator must use ("Fp2"/"Fsl2" for NSGA2)."""
+        """The `sim.linkage.evaluating` fitness the evaluator must use ("Fp2"/"Fsl2" for NSGA2)."""
         return evaluated_fitness(self.fitness, self.approach in MULTI_OBJECTIVE)
 
     @property
@@ -199,7 +199,7 @@ def resolve_target(target: str) -> Target:
         TrialSpecError: naming the value when it is neither a published name nor a
             readable JSON target file.
     """
-    from linkevo.sim.fitness import Target, named_target
+    from linkevo.sim.linkage.fitness import Target, named_target
 
     if target in TARGETS:
         return named_target(target)

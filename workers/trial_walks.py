@@ -11,9 +11,9 @@ import numpy as np
 import pandas as pd
 
 from linkevo.sim import decode, simulate
-from linkevo.sim.linkage_doc import to_document
-from linkevo.sim.physical import physical_checks
-from linkevo.sim.robot import FLAT, Physics
+from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.linkage.physical import physical_checks
+from linkevo.sim.robot.hexapod import FLAT, Physics
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.run_layout import (
     BEST_WALKER,
@@ -30,7 +30,7 @@ from linkevo.workers.walk_log import WalkLog
 def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Path) -> float:
     """Walks the trial's `spec.walk_rerank` lowest-loss final linkages that pass the
     physical checks once each on the simulated robot (flat floor, the walk map's protocol,
-    `sim.walk_map`), writes `walk_rerank.parquet` (their rows, with loss) and the furthest
+    `sim.robot.walk_map`), writes `walk_rerank.parquet` (their rows, with loss) and the furthest
     walker that does not break as `best_walker.json`; returns its distance in cm (NaN when
     none walks).
 
@@ -38,7 +38,7 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
         view: the optimizer's final `view()`: genome (N, 56), loss (N,), cell (N,) where
             it has cells.
     """
-    from linkevo.sim.walk_map import COLUMNS, CellBatch, walk_cells  # MuJoCo: only when asked
+    from linkevo.sim.robot.walk_map import COLUMNS, CellBatch, walk_cells  # MuJoCo: only when asked
 
     genomes = np.asarray(view["genome"], dtype=np.float64)
     loss = np.asarray(view["loss"], dtype=np.float64)

@@ -1,4 +1,4 @@
-"""Provides `WalkingEvaluator`: a walking trial's evaluator (fitness F_w, `sim.walk_fitness`).
+"""Provides `WalkingEvaluator`: a walking trial's evaluator (fitness F_w, `sim.robot.walk_fitness`).
 
 A batch is evaluated as the path fitnesses are (the 2-D kernel gives every candidate its
 foot path and descriptors), then screened: a candidate that fails the 2-D checks is
@@ -21,12 +21,12 @@ from typing import Protocol
 import numpy as np
 
 from linkevo.sim import decode, simulate
-from linkevo.sim.evaluating import evaluate
-from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.genome import validate_genomes
-from linkevo.sim.physical import physical_checks
-from linkevo.sim.robot import Physics
-from linkevo.sim.walk_fitness import (
+from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.evaluation import Evaluation
+from linkevo.sim.linkage.genome import validate_genomes
+from linkevo.sim.linkage.physical import physical_checks
+from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.walk_fitness import (
     CandidateWalk,
     floor_losses,
     rejected_loss,
@@ -48,7 +48,7 @@ class Walkers(Protocol):
         bars: np.ndarray,
         physics: Physics,
     ) -> Iterator[tuple[CandidateWalk, str]]:
-        """Yields each candidate's walk (`sim.walk_fitness.walk_candidate`, legs in
+        """Yields each candidate's walk (`sim.robot.walk_fitness.walk_candidate`, legs in
         `known` not walked, each with its bar (K,), on the robot `physics` describes) and
         where it ran, in order."""
         ...

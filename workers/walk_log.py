@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from linkevo.sim.robot import WALK_SECONDS
-from linkevo.sim.walk_fitness import OBJECTIVE_FLOORS, WALK_ORDER, CandidateWalk
-from linkevo.sim.walk_map import COLUMNS, walk_map_frame
+from linkevo.sim.robot.hexapod import WALK_SECONDS
+from linkevo.sim.robot.walk_fitness import OBJECTIVE_FLOORS, WALK_ORDER, CandidateWalk
+from linkevo.sim.robot.walk_map import COLUMNS, walk_map_frame
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -36,7 +36,7 @@ class WalkLog:
     Attributes:
         genome: (N, 56) each candidate.
         iteration: (N,) the iteration it was asked in (1 for the first batch).
-        stage: (N,) its `sim.walk_fitness.STAGES` stage (never "rejected").
+        stage: (N,) its `sim.robot.walk_fitness.STAGES` stage (never "rejected").
         key: (N,) its leg's key ("" when no leg was built).
         node: (N,) where it was built and walked (a Ray node id, or this host's name).
         compute_s: (N,) what its build and walks took there.
@@ -97,7 +97,7 @@ class WalkLog:
         return {str(self.key[i]): self.rows(i) for i in walked}
 
     def rows(self, i: int) -> dict[str, dict]:
-        """Returns candidate i's row per floor (`sim.walk_map.COLUMNS`, cell -1)."""
+        """Returns candidate i's row per floor (`sim.robot.walk_map.COLUMNS`, cell -1)."""
         out = {}
         for floor, columns in self.floors.items():
             values = {k: v[i].item() for k, v in columns.items()}
@@ -106,7 +106,7 @@ class WalkLog:
 
     def metrics(self) -> dict[str, float]:
         """Returns the running counts and the best sound walk on each floor (cm credited,
-        `sim.walk_fitness.credited_cm`; NaN before any)."""
+        `sim.robot.walk_fitness.credited_cm`; NaN before any)."""
         out = {k: float(v) for k, v in self.counts.items()}
         for floor in OBJECTIVE_FLOORS:
             columns = self.floors[floor]
@@ -175,7 +175,7 @@ class WalkLog:
         return frame
 
     def walk_map(self, cells: np.ndarray, genomes: np.ndarray) -> pd.DataFrame:
-        """Returns the walk map (`sim.walk_map.COLUMNS`) of kept individuals: cells (N,)
+        """Returns the walk map (`sim.robot.walk_map.COLUMNS`) of kept individuals: cells (N,)
         and genomes (N, 56), a row per floor for each that the log built."""
         at = {g.tobytes(): i for i, g in enumerate(self.genome)}
         rows = []

@@ -24,7 +24,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from linkevo.algorithms.walk_model import WalkData, WalkModel
-from linkevo.sim.walk_features import FEATURE_NAMES, walk_features, walk_targets
+from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features, walk_targets
 
 START = 200
 """Walks logged before the model first screens."""
@@ -94,7 +94,7 @@ class WalkSurrogate:
 
 def training_data(log, rows: int, mode: str) -> WalkData:
     """Returns the walks of the first `rows` candidates of a walk log that were walked, as
-    the walk model learns them (`sim.walk_features.walk_targets`)."""
+    the walk model learns them (`sim.robot.walk_features.walk_targets`)."""
     import pandas as pd
 
     walked = np.flatnonzero(log.stage[:rows] == "walked")

@@ -208,9 +208,9 @@ def _physics_world(args: argparse.Namespace, config):
         return None
     from linkevo.hardware.physics_bus import PhysicsWorld
     from linkevo.orchestrator.commands.hexapod_simulate import simulation_source
-    from linkevo.sim.leg import leg_from_genome
-    from linkevo.sim.linkage_doc import from_document
-    from linkevo.sim.robot import FLOORS
+    from linkevo.sim.linkage.linkage_doc import from_document
+    from linkevo.sim.robot.hexapod import FLOORS
+    from linkevo.sim.robot.leg import leg_from_genome
 
     if args.linkage is None:
         raise CliError("--emulate physics needs --linkage RUN_ID[:CELL] or FILE.json")

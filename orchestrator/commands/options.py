@@ -1,6 +1,6 @@
 """Provides the options several commands share, each declared and checked once: the store
 (`--tracking-uri`, `--experiment`), a walk's `--seconds`, `--floor` (from
-`sim.robot.FLOORS`), Ray's `--address`, the robot's `--config`; and `linkevo_command`,
+`sim.robot.hexapod.FLOORS`), Ray's `--address`, the robot's `--config`; and `linkevo_command`,
 how to run linkevo again as this process was run (for the lines that resume a command).
 
 A value an option refuses stops the command in argparse, before anything starts, with the
@@ -15,7 +15,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from linkevo.sim.robot import FLAT, FLOORS, ROBOT_MODELS, WALK_SECONDS
+from linkevo.sim.robot.hexapod import FLAT, FLOORS, ROBOT_MODELS, WALK_SECONDS
 from linkevo.sim.study import ROBOTS
 from linkevo.workers.store.tracking import DEFAULT_EXPERIMENT
 
@@ -102,7 +102,7 @@ def robot(parser: argparse.ArgumentParser) -> None:
 
 
 def robot_model(parser: argparse.ArgumentParser) -> None:
-    """Adds `--model`: the robot model a walk runs on (`sim.robot.ROBOT_MODELS`)."""
+    """Adds `--model`: the robot model a walk runs on (`sim.robot.hexapod.ROBOT_MODELS`)."""
     parser.add_argument(
         "--model",
         default=ROBOT_MODELS[0],
@@ -112,7 +112,7 @@ def robot_model(parser: argparse.ArgumentParser) -> None:
 
 
 def floor(parser: argparse.ArgumentParser, *, required: bool = False, default: str = FLAT):
-    """Adds `--floor`, one of `sim.robot.FLOORS`."""
+    """Adds `--floor`, one of `sim.robot.hexapod.FLOORS`."""
     if required:
         parser.add_argument("--floor", required=True, choices=tuple(FLOORS), help="the floor")
     else:

@@ -101,7 +101,7 @@ def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
 
     A trial offers its best linkage and, when that is not buildable and the trial keeps a
     repertoire, its lowest-loss buildable cell; trials are read until none left can beat
-    the design found. Buildable is `sim.physical`'s verdict (it turns fully, no toggle,
+    the design found. Buildable is `sim.linkage.physical`'s verdict (it turns fully, no toggle,
     transmission angles above the limit).
 
     A walking trial (F_w) offers its best linkage when it walks without breaking: its
@@ -111,9 +111,9 @@ def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
         CliError: no trial offers a buildable design.
     """
     from linkevo.orchestrator.pull import checks_line
-    from linkevo.sim.linkage_doc import from_document, to_document
+    from linkevo.sim.linkage.linkage_doc import from_document, to_document
+    from linkevo.sim.robot.walk_fitness import SOUND_BELOW
     from linkevo.sim.study import REPERTOIRE_APPROACHES, WALKING_FITNESS
-    from linkevo.sim.walk_fitness import SOUND_BELOW
     from linkevo.workers.store.linkages import LinkageRef, list_cells, load_source
 
     found: tuple[float, str, str] | None = None

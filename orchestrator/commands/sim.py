@@ -54,7 +54,7 @@ def load_genomes(path: Path) -> np.ndarray:
     """Returns the validated (N, 56) genomes stored in a .npy file, or raises CliError."""
     import numpy as np
 
-    from linkevo.sim.genome import GenomeError, validate_genomes
+    from linkevo.sim.linkage.genome import GenomeError, validate_genomes
 
     if path.suffix != ".npy" or not path.is_file():
         raise CliError(f"genome file {str(path)!r} must be an existing .npy file")
@@ -107,7 +107,7 @@ def check_angles(angles: int, n_genomes: int = 1) -> None:
     """Raises CliError unless `angles` (crank angles per turn) is at least MIN_ANGLES and
     the evaluation of `n_genomes` at that many angles fits in this machine's memory."""
     from linkevo.orchestrator.config import MEMORY_SHARE, machine_memory
-    from linkevo.sim.evaluation import evaluation_bytes
+    from linkevo.sim.linkage.evaluation import evaluation_bytes
 
     if angles < MIN_ANGLES:
         raise CliError(f"--angles must be >= {MIN_ANGLES}, got {angles}")
@@ -125,7 +125,7 @@ def run_eval(args: argparse.Namespace) -> int:
     """Handles `linkevo eval`."""
     import numpy as np
 
-    from linkevo.sim.evaluating import evaluate
+    from linkevo.sim.linkage.evaluating import evaluate
     from linkevo.workers.evaluators import resolve_target
     from linkevo.workers.store.artifacts import write_npz_atomic
 
@@ -155,7 +155,7 @@ def run_eval(args: argparse.Namespace) -> int:
 
 def run_show(args: argparse.Namespace) -> int:
     """Handles `linkevo show`."""
-    from linkevo.sim.linkage_doc import DocumentError, from_document
+    from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
     from linkevo.workers.plots.linkage import SUFFIXES, draw_linkage
     from linkevo.workers.store.artifacts import read_document
 

@@ -9,7 +9,7 @@ import sys
 
 from linkevo.orchestrator.commands import options
 from linkevo.orchestrator.commands.hexapod import load_robot
-from linkevo.sim.robot import FLOORS
+from linkevo.sim.robot.hexapod import FLOORS
 from linkevo.workers.store import run_layout as layout
 
 BOTH = "both"

@@ -1,5 +1,5 @@
-"""Provides the physical checks (`sim.physical`) of a grid's best linkages, per trial and per
-approach and fitness: which of the study's answers a builder could build as simulated."""
+"""Provides the physical checks (`sim.linkage.physical`) of a grid's best linkages, per trial and
+per approach and fitness: which of the study's answers a builder could build as simulated."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pandas as pd
 
 from linkevo.orchestrator.report.load import GridData
 from linkevo.sim import decode, simulate
-from linkevo.sim.linkage_doc import DocumentError, from_document
-from linkevo.sim.physical import physical_checks
+from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
+from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.runs import in_study_order

@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.study import LEARNED, is_map_elites, label
 from linkevo.workers.plots.repertoire import (
     DOWNSAMPLED,

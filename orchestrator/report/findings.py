@@ -122,7 +122,7 @@ def check_findings(
                 diversity,
                 number,
                 f"With {label(fitness)}, {approach} created the most diverse paths (Results).",
-                "a higher median path diversity (`sim.path_diversity`) than every other "
+                "a higher median path diversity (`sim.linkage.path_diversity`) than every other "
                 f"approach; {RULE}",
                 fitness,
                 [(approach, a) for a in searches if a != approach],

@@ -9,7 +9,7 @@ from collections.abc import Sequence
 import pandas as pd
 
 from linkevo.orchestrator.report.verdicts import REPRODUCED, Finding
-from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG
+from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, TOGGLE_DEG
 from linkevo.sim.study import STUDY_EVALUATIONS
 
 MIN_TRIALS_PER_CELL = 5
@@ -154,7 +154,7 @@ def render_html(
     parts.append(table_html(tests))
     parts.append(
         "<h2>Can the best linkages be built?</h2><p>The physical checks of each trial's "
-        "best-ever linkage (<code>sim.physical</code>; per trial in "
+        "best-ever linkage (<code>sim.linkage.physical</code>; per trial in "
         "best_linkage_checks.csv): <i>buildable</i> linkages turn fully, pass no toggle "
         f"position (transmission angle below {TOGGLE_DEG:g} deg) and stretch no beam by more "
         f"than {BUILDABLE_STRETCH:g} modules within the simulation's tolerance. Size is the "

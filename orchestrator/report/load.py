@@ -32,7 +32,7 @@ HISTORY_COLUMNS: tuple[str, ...] = (
 FINAL_MEASURES: tuple[str, ...] = ("common_coverage", "common_qd_score", "path_diversity")
 """Per-trial measures read as their last logged value: coverage and QD-score of every
 evaluated genome on the common MAP-LIS grid (`algorithms.common_grid`), and the diversity
-of the best paths (`sim.path_diversity`); NaN for a trial that did not log them."""
+of the best paths (`sim.linkage.path_diversity`); NaN for a trial that did not log them."""
 ARCHIVE_FILES: tuple[str, ...] = (layout.REPERTOIRE, layout.POPULATION)
 STATUS_MISSING = "MISSING"
 DOWNLOAD_THREADS = 8

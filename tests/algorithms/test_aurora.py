@@ -15,7 +15,7 @@ from linkevo.algorithms.aurora_model import PathAutoencoder
 from linkevo.algorithms.aurora_paths import prepare_paths
 from linkevo.algorithms.factory import make_optimizer
 from linkevo.sim import evaluate
-from linkevo.sim.evaluation import Evaluation
+from linkevo.sim.linkage.evaluation import Evaluation
 
 SMALL = {
     "initial_epochs": 4,

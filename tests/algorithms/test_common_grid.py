@@ -7,8 +7,8 @@ import pytest
 
 from linkevo.algorithms import scalar_loss
 from linkevo.algorithms.scoring import QD_OFFSETS
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
-from linkevo.sim.path_diversity import path_diversity
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
+from linkevo.sim.linkage.path_diversity import path_diversity
 from tests.algorithms.test_optimizers import make, synthetic_evaluation
 
 

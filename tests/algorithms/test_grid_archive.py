@@ -7,7 +7,7 @@ import pytest
 
 from linkevo.algorithms.archive import GridArchive
 from linkevo.algorithms.individuals import Individuals
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES
 
 
 def batch(loss: list[float], desc: list[list[float]], tag: float = 0.0) -> Individuals:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from linkevo.algorithms.mutation import bounce_back, initial_sigma, mutate
-from linkevo.sim.genome import LENGTH_GENES, N_GENES
+from linkevo.sim.linkage.genome import LENGTH_GENES, N_GENES
 
 OTHER_GENES = np.setdiff1d(np.arange(N_GENES), LENGTH_GENES)
 

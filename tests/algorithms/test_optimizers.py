@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 from linkevo.algorithms import MapElites, make_optimizer, scalar_loss
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES
-from linkevo.sim.evaluating import evaluate
-from linkevo.sim.evaluation import Evaluation
-from linkevo.sim.genome import N_GENES
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES
+from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.evaluation import Evaluation
+from linkevo.sim.linkage.genome import N_GENES
 from linkevo.sim.study import APPROACHES, REPERTOIRE_APPROACHES
 
 BUILT_IN = [a for a in APPROACHES if a != "MAP-AU"]

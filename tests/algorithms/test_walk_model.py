@@ -1,4 +1,4 @@
-"""The learned walk model (`algorithms.walk_model`) and its inputs (`sim.walk_features`):
+"""The learned walk model (`algorithms.walk_model`) and its inputs (`sim.robot.walk_features`):
 what it learns, what it keeps, what it refuses."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import torch
 from scipy.stats import spearmanr
 
 from linkevo.algorithms.walk_model import FLOORS, WalkData, WalkModel
-from linkevo.sim.walk_features import FEATURE_NAMES, walk_features
+from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features
 
 
 def synthetic(n: int, seed: int) -> WalkData:

@@ -150,7 +150,7 @@ def test_the_table_never_pools_trials_of_different_linkages(store, tmp_path, con
 def test_cell_reference_builds_the_document_from_the_repertoire_genome(
     store, tmp_path, config_file, monkeypatch
 ):
-    from linkevo.sim.linkage_doc import from_document, to_document
+    from linkevo.sim.linkage.linkage_doc import from_document, to_document
 
     uri, client, experiment_id = store
     genome = np.random.default_rng(7).random(56)

@@ -13,7 +13,7 @@ from linkevo.hardware import control_table as ct
 from linkevo.hardware.errors import SafetyStop
 from linkevo.hardware.physics_bus import PhysicsWorld
 from linkevo.hardware.session import run_walk
-from linkevo.sim.robot import FLOORS, Motor
+from linkevo.sim.robot.hexapod import FLOORS, Motor
 from tests.helpers.walking import jansen_leg
 
 

@@ -20,8 +20,8 @@ import pyarrow.parquet as pq
 from mlflow.entities import Metric, Param, RunTag
 from mlflow.tracking import MlflowClient
 
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, cell_index
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, cell_index
+from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.sim.study import STUDY_EVALUATIONS
 
 N_GENES = 56

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from linkevo.sim.leg import POSE_ANGLES, Leg
+from linkevo.sim.robot.leg import POSE_ANGLES, Leg
 
 
 def _circle(p0, p1, r0: float, r1: float, pick) -> np.ndarray:

@@ -16,8 +16,8 @@ from linkevo.hardware.config import load_config
 from linkevo.hardware.field_trial import PHYSICS, REAL, log_field_trial
 from linkevo.orchestrator.calibration import FieldTrial, simulated_cm, with_values
 from linkevo.orchestrator.cli import main
-from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.workers.store.linkages import SourceLinkage
 from linkevo.workers.store.tracking import ensure_experiment
 

@@ -18,7 +18,7 @@ from mlflow.tracking import MlflowClient
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.explore import repertoire_view
 from linkevo.sim import decode, simulate
-from linkevo.sim.physical import physical_checks
+from linkevo.sim.linkage.physical import physical_checks
 from linkevo.workers.store.runs import RunStore, TrialRun
 from linkevo.workers.store.tracking import ensure_experiment
 from linkevo.workers.trial_spec import TrialSpec
@@ -277,7 +277,7 @@ def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, ml
 
 
 def test_a_walk_beyond_the_level_body_bound_is_flagged_in_the_view(store, tmp_path):
-    from linkevo.sim.walk_map import walk_map_frame
+    from linkevo.sim.robot.walk_map import walk_map_frame
 
     uri, runs = store
     table = RunStore(uri).repertoire(runs["MAP-LIS"], tmp_path)

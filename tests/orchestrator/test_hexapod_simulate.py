@@ -12,8 +12,8 @@ from mlflow.tracking import MlflowClient
 
 from linkevo import sim
 from linkevo.orchestrator.cli import main
-from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.tracking import ensure_experiment
 

@@ -12,8 +12,8 @@ from mlflow.tracking import MlflowClient
 from linkevo import sim
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.pull import build_sheet
-from linkevo.sim.linkage_doc import FORMAT, to_document
-from linkevo.sim.physical import physical_checks
+from linkevo.sim.linkage.linkage_doc import FORMAT, to_document
+from linkevo.sim.linkage.physical import physical_checks
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.tracking import ensure_experiment
 

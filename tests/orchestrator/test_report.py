@@ -24,8 +24,8 @@ from linkevo.orchestrator.report.html import table_html
 from linkevo.orchestrator.report.stats import holm, pairwise_tests
 from linkevo.orchestrator.report.verdicts import NOT_SHOWN, NOT_TESTABLE, REPRODUCED
 from linkevo.sim import decode, simulate
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.physical import physical_checks
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.linkage.physical import physical_checks
 from linkevo.workers.store.tables import fold_bins
 from tests.helpers.report import GridSpec, write_grid
 

@@ -15,7 +15,7 @@ from linkevo.hardware.errors import ConfigError
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.config import ConfigError as GridConfigError
 from linkevo.orchestrator.config import GridConfig
-from linkevo.sim.robot import FLOORS, Frame, Motor, Physics
+from linkevo.sim.robot.hexapod import FLOORS, Frame, Motor, Physics
 from linkevo.workers.trial_spec import TrialSpec, TrialSpecError
 
 SHIPPED = Path(__file__).parents[2] / "configs" / "hexapod.toml"

@@ -8,8 +8,8 @@ import json
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.cli import main
-from linkevo.sim.genome import random_genomes
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.genome import random_genomes
+from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.tracking import ensure_experiment
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from linkevo.sim import reference
-from linkevo.sim.genome import BLOCK_SIZE, CRANK_GENE, FIRST_BLOCK, N_BLOCKS, N_GENES
+from linkevo.sim.linkage import reference
+from linkevo.sim.linkage.genome import BLOCK_SIZE, CRANK_GENE, FIRST_BLOCK, N_BLOCKS, N_GENES
 
 TRIANGLE_GENE = 0.5
 EXTENSION_GENE = 0.1

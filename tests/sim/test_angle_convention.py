@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from linkevo.sim import kernels, reference
+from linkevo.sim.linkage import kernels, reference
 
 FOOT_TRIANGLES = [  # (angle from A, angle from C) in degrees, and whether the foot is up
     ((350.0, 10.0), False),  # mean 180: not up ((-pi, pi] would say 0, also not up)

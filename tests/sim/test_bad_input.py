@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim import reference
-from linkevo.sim.fitness import named_target
+from linkevo.sim.linkage import reference
+from linkevo.sim.linkage.fitness import named_target
 
 EVALUATORS = [sim.evaluate, reference.evaluate_reference]
 

@@ -1,5 +1,5 @@
-"""Tests `sim.builds`: the whole batch's LEGO builds found by the depth-first search agree
-with `sim.lego.quantise`'s exhaustive one, turn rigidly, and stand in as evolved where none
+"""Tests `sim.robot.builds`: the whole batch's LEGO builds found by the depth-first search agree
+with `sim.robot.lego.quantise`'s exhaustive one, turn rigidly, and stand in as evolved where none
 is found; `with_lengths` writes lengths as decoding does; the tripod features by hand."""
 
 from __future__ import annotations
@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim.builds import lego_builds
-from linkevo.sim.decoding import NODE_KINDS, with_lengths
-from linkevo.sim.kinematics import simulate
-from linkevo.sim.lego import QuantiseError, whole_module_build
-from linkevo.sim.physical import max_stretch, physical_checks
-from linkevo.sim.walk_features import _tripod
+from linkevo.sim.linkage.decoding import NODE_KINDS, with_lengths
+from linkevo.sim.linkage.kinematics import simulate
+from linkevo.sim.linkage.physical import max_stretch, physical_checks
+from linkevo.sim.robot.builds import lego_builds
+from linkevo.sim.robot.lego import QuantiseError, whole_module_build
+from linkevo.sim.robot.walk_features import _tripod
 
 
 @pytest.fixture(scope="module")

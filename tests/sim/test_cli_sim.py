@@ -12,8 +12,8 @@ from PIL import Image
 
 from linkevo import sim
 from linkevo.orchestrator.cli import main
-from linkevo.sim.fitness import named_target
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.fitness import named_target
+from linkevo.sim.linkage.linkage_doc import to_document
 
 
 @pytest.fixture

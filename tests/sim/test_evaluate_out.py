@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from linkevo.sim import Evaluation, evaluate, random_genomes
-from linkevo.sim.evaluation import ALIGNMENT, field_shapes
+from linkevo.sim.linkage.evaluation import ALIGNMENT, field_shapes
 
 
 @pytest.mark.parametrize("fitness", ["Fp", "Fsl", "Fp2", "Fsl2"])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim import reference
+from linkevo.sim.linkage import reference
 
 D16_ARC_Y = [1.26875, 2.26875, 2.76875, 2.96875, 2.76875, 2.26875, 1.26875]
 D24_ARC_Y = [1.196875, 1.696875, 1.946875, 2.046875, 1.946875, 1.696875, 1.196875]

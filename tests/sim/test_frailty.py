@@ -1,4 +1,4 @@
-"""Frail legs (`sim.frailty`) against beam theory on hand-made legs, and the break rule on
+"""Frail legs (`sim.robot.frailty`) against beam theory on hand-made legs, and the break rule on
 the real engine: the study's benchmark leg (the MAP-LIS first robot, whose real
 counterpart's legs were "too large to support the weight of the robot frame") is frail;
 a short leg is not."""
@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linkevo.sim.frailty import (
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.robot.frailty import (
     ABS_E_N_MM2,
     FRAIL_FOOT_MM,
     I_IN_MM4,
@@ -23,10 +24,9 @@ from linkevo.sim.frailty import (
     foot_load_n,
     frailty,
 )
-from linkevo.sim.leg import Leg, leg_from_genome
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.robot import BEAM_KG_PER_MODULE, FLOORS, Frame
-from linkevo.sim.walking import WalkSettings, walk
+from linkevo.sim.robot.hexapod import BEAM_KG_PER_MODULE, FLOORS, Frame
+from linkevo.sim.robot.leg import Leg, leg_from_genome
+from linkevo.sim.robot.walking import WalkSettings, walk
 
 ROOT = Path(__file__).parents[2]
 

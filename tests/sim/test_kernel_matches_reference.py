@@ -1,4 +1,5 @@
-"""The fast kernel (`sim.decoding`, `sim.simulate`, `sim.evaluating`) equals the plain reference.
+"""The fast kernel (`sim.linkage.decoding`, `sim.simulate`, `sim.linkage.evaluating`) equals the
+plain reference.
 
 Both implement the spec independently; they must agree to 1e-9 on every Evaluation field,
 for all four fitnesses and both modes, on random genomes and on heavily mutated ones (many
@@ -14,8 +15,8 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim import reference
-from linkevo.sim.genome import MAX_BEAMS
+from linkevo.sim.linkage import reference
+from linkevo.sim.linkage.genome import MAX_BEAMS
 
 ATOL = 1e-9
 FIELDS = ("loss", "error", "angle_error", "valid", "foot", "foot_x", "foot_y")
@@ -171,7 +172,7 @@ def test_angle_error_when_the_foot_beam_angles_cancel_exactly(mode):
 def test_helpers_compile_inlined_with_noalias_arrays():
     """The build `sim_throughput` measures: a numba without the `noalias` flag would fall
     back, silently, to the slower build (equal outputs), and this would say so."""
-    from linkevo.sim import kernels
+    from linkevo.sim.linkage import kernels
 
     assert kernels.NOALIAS == {"_noalias": True}
     assert kernels._JIT["_noalias"] and kernels._JIT["forceinline"]

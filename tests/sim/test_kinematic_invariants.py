@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim import reference
-from linkevo.sim.genome import MAX_BEAMS, N_NODES
+from linkevo.sim.linkage import reference
+from linkevo.sim.linkage.genome import MAX_BEAMS, N_NODES
 
 T = reference.TOLERANCE
 EXACT = 1e-9

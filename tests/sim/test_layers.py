@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim.layers import crossing_pairs, layer_plan, min_layers
+from linkevo.sim.robot.layers import crossing_pairs, layer_plan, min_layers
 
 PETERSEN = [(i, (i + 1) % 5) for i in range(5)] + [(i, i + 5) for i in range(5)]
 PETERSEN += [(5 + i, 5 + (i + 2) % 5) for i in range(5)]

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim.lego import QuantiseError, quantise
+from linkevo.sim.robot.lego import QuantiseError, quantise
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +53,7 @@ def test_the_chosen_rounding_keeps_the_path_closest(valid_genomes):
 
 def quantise_fixed(genome: np.ndarray, lengths: np.ndarray) -> float | None:
     """The mean foot-path shift of one given rounding, or None when it is not exact."""
-    from linkevo.sim.lego import _with_lengths
+    from linkevo.sim.robot.lego import _with_lengths
 
     base = sim.decode(genome[None])
     one = _with_lengths(base, lengths[None])

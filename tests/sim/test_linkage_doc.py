@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim.linkage_doc import FORMAT, from_document, to_document
+from linkevo.sim.linkage.linkage_doc import FORMAT, from_document, to_document
 
 
 @pytest.fixture(scope="module")
@@ -74,7 +74,7 @@ def assert_same_motion(got: sim.Motion, want: sim.Motion) -> None:
 def test_the_document_alone_rebuilds_the_genomes_simulation(mode):
     """Thousands of random linkages (valid or not): a JSON round trip of the document,
     rebuilt without its genome, simulates to the same bits as the genome."""
-    from linkevo.sim.linkage_doc import batch_from_document, simulate_document
+    from linkevo.sim.linkage.linkage_doc import batch_from_document, simulate_document
 
     genomes = sim.random_genomes(np.random.default_rng(23 if mode == "paper" else 29), 1500)
     want = sim.simulate(sim.decode(genomes, mode), 24)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim import reference
+from linkevo.sim.linkage import reference
 
 T = reference.TOLERANCE
 ANGLES = np.arange(40) * 2.0 * math.pi / 40

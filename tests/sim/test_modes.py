@@ -11,8 +11,8 @@ import math
 import numpy as np
 
 from linkevo import sim
-from linkevo.sim import reference
-from linkevo.sim.genome import BLOCK_SIZE, FIRST_BLOCK, N_BLOCKS
+from linkevo.sim.linkage import reference
+from linkevo.sim.linkage.genome import BLOCK_SIZE, FIRST_BLOCK, N_BLOCKS
 
 T = reference.TOLERANCE
 

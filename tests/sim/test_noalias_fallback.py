@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim import kernels
+from linkevo.sim.linkage import kernels
 
 SCRIPT = """
 import sys
 import numpy as np
 from linkevo import sim
-from linkevo.sim import kernels
+from linkevo.sim.linkage import kernels
 assert kernels.NOALIAS == {} and "_noalias" not in kernels._JIT
 assert "_noalias" not in kernels.place_triangle.targetoptions
 genomes = np.load(sys.argv[1])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from linkevo import sim
-from linkevo.sim.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
+from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 
 
 def plain_checks(batch: sim.LinkageBatch, motion: sim.Motion, i: int) -> dict:

@@ -1,4 +1,4 @@
-"""Tests for `sim.pylinkage_export`: a document's pylinkage Linkage moves as linkevo's."""
+"""Tests for `sim.linkage.pylinkage_export`: a document's pylinkage Linkage moves as linkevo's."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 
 from linkevo import sim
 from linkevo.sim import decode, simulate
-from linkevo.sim.linkage_doc import to_document
-from linkevo.sim.physical import physical_checks
-from linkevo.sim.pylinkage_export import to_pylinkage
+from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.linkage.physical import physical_checks
+from linkevo.sim.linkage.pylinkage_export import to_pylinkage
 
 SUBSTEPS = 10
 

@@ -9,12 +9,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from linkevo.sim.evaluating import evaluate
-from linkevo.sim.genome import random_genomes
-from linkevo.sim.lean_model import build_lean_robot
-from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.robot import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG, Frame, Motor
-from linkevo.sim.walking import LOOP_ERROR_BOUND_MM, WalkSettings, walk
+from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.genome import random_genomes
+from linkevo.sim.robot.hexapod import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG, Frame, Motor
+from linkevo.sim.robot.lean_model import build_lean_robot
+from linkevo.sim.robot.leg import LegError, leg_from_genome
+from linkevo.sim.robot.walking import LOOP_ERROR_BOUND_MM, WalkSettings, walk
 from tests.helpers.walking import crank_leg, jansen_leg
 
 SHORT = WalkSettings(seconds=4.0)
@@ -201,8 +201,8 @@ def test_a_braked_crank_turns_on_the_datasheet_line_through_the_walks_control_ti
     settle at lies within 5 % of the MX-28's torque-speed line at that load. The robot
     hangs in the air (no gravity, its frame held still at every tick), so the brake is the
     load."""
-    from linkevo.sim.robot_model import control_tick
-    from linkevo.sim.walking import MODELS
+    from linkevo.sim.robot.model import control_tick
+    from linkevo.sim.robot.walking import MODELS
 
     motor = Motor()
     build, step = MODELS[model]

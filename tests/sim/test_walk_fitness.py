@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.physical import PhysicalChecks
-from linkevo.sim.robot import FLOORS
-from linkevo.sim.walk_fitness import (
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.linkage.physical import PhysicalChecks
+from linkevo.sim.robot.hexapod import FLOORS
+from linkevo.sim.robot.walk_fitness import (
     BROKEN_LOSS,
     NO_LEG_LOSS,
     REJECTED_LOSS,
@@ -24,8 +24,8 @@ from linkevo.sim.walk_fitness import (
     rejected_loss,
     walk_candidate,
 )
-from linkevo.sim.walk_map import CellBatch, walk_cells, walk_map_settings
-from linkevo.sim.walking import walk
+from linkevo.sim.robot.walk_map import CellBatch, walk_cells, walk_map_settings
+from linkevo.sim.robot.walking import walk
 from tests.helpers.walking import crank_leg
 
 SOUND_LEG = Path(__file__).parents[1] / "data" / "sound_leg.json"
@@ -107,8 +107,8 @@ def test_the_floors_losses_fall_in_their_tiers():
 def test_caveats_name_what_a_builder_should_doubt():
     from dataclasses import replace
 
-    from linkevo.sim.walk_figures import caveats
-    from linkevo.sim.walking import Walk
+    from linkevo.sim.robot.walk_figures import caveats
+    from linkevo.sim.robot.walking import Walk
 
     plain = Walk(
         distance_m=0.5, bound_m=1.0, heading_drift_deg=0.0, body_height_m=0.1, clearance_m=0.05,

@@ -7,12 +7,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import spearmanr
 
-from linkevo.sim.evaluating import evaluate
-from linkevo.sim.genome import random_genomes
-from linkevo.sim.leg import LegError, leg_from_genome
-from linkevo.sim.robot import FLOORS
-from linkevo.sim.walk_map import COLUMNS, CellBatch, build_cells, group_legs, walk_cells
-from linkevo.sim.walking import WalkSettings, field_trials
+from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.genome import random_genomes
+from linkevo.sim.robot.hexapod import FLOORS
+from linkevo.sim.robot.leg import LegError, leg_from_genome
+from linkevo.sim.robot.walk_map import COLUMNS, CellBatch, build_cells, group_legs, walk_cells
+from linkevo.sim.robot.walking import WalkSettings, field_trials
 
 SECONDS = 4.0
 

@@ -12,7 +12,7 @@ from PIL import Image
 
 from linkevo import sim
 from linkevo.orchestrator.pull import lego_build
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.workers.plots.build import (
     A4_MM,
     PAGE_MARGIN_MM,

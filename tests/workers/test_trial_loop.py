@@ -13,8 +13,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from linkevo.sim.linkage_doc import from_document
-from linkevo.sim.path_diversity import path_diversity
+from linkevo.sim.linkage.linkage_doc import from_document
+from linkevo.sim.linkage.path_diversity import path_diversity
 from linkevo.workers.checkpoint import CheckpointError
 from linkevo.workers.evaluators import LocalEvaluator, Stateless
 from linkevo.workers.recorders import NullRecorder

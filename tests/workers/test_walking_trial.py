@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from linkevo.sim.walk_fitness import BROKEN_LOSS
+from linkevo.sim.robot.walk_fitness import BROKEN_LOSS
 from linkevo.workers.evaluators import make_evaluator
 from linkevo.workers.recorders import NullRecorder
 from linkevo.workers.store.artifacts import read_npz

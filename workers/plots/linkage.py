@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from linkevo.sim.decoding import decode
-from linkevo.sim.genome import validate_genomes
-from linkevo.sim.kinematics import simulate
+from linkevo.sim.linkage.decoding import decode
+from linkevo.sim.linkage.genome import validate_genomes
+from linkevo.sim.linkage.kinematics import simulate
 from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.store.artifacts import atomic_path
 

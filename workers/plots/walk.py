@@ -20,8 +20,8 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.figure import Figure
 from PIL import Image
 
-from linkevo.sim.robot import LEG_SLOTS
-from linkevo.sim.walking import Walk
+from linkevo.sim.robot.hexapod import LEG_SLOTS
+from linkevo.sim.robot.walking import Walk
 from linkevo.workers.store.artifacts import atomic_path
 
 CAMERA = {"distance": 1.1, "azimuth_deg": 45.0, "elevation_deg": 18.0, "fov_deg": 45.0}

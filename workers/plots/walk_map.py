@@ -11,7 +11,7 @@ import pandas as pd
 from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
-from linkevo.sim.robot import in_floor_order
+from linkevo.sim.robot.hexapod import in_floor_order
 from linkevo.workers.store.artifacts import atomic_path
 from linkevo.workers.store.tables import axis_names, bin_columns, fold_bins, space_of
 
@@ -22,7 +22,7 @@ BROKEN = ListedColormap(["#e34a33"])
 
 
 def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> Path:
-    """Draws the walk map (`sim.walk_map.COLUMNS` rows with the cells' bins) to a PNG at
+    """Draws the walk map (`sim.robot.walk_map.COLUMNS` rows with the cells' bins) to a PNG at
     `path`, atomically, and returns the path.
 
     Args:

@@ -201,12 +201,12 @@ def write_parquet_atomic(
 
 def read_document(path: Path) -> dict:
     """Returns the linkage document in a JSON file, its size checked before it is read and
-    its nesting before it is parsed (`sim.linkage_doc.parse_document`).
+    its nesting before it is parsed (`sim.linkage.linkage_doc.parse_document`).
 
     Raises:
         DocumentError: naming the file: missing, unreadable, too large or not a document.
     """
-    from linkevo.sim.linkage_doc import (
+    from linkevo.sim.linkage.linkage_doc import (
         MAX_DOCUMENT_BYTES,
         DocumentError,
         check_document_size,

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.linkage_doc import to_document
+from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.tables import bin_columns
@@ -67,7 +67,7 @@ class SourceLinkage:
 def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
     """Returns the linkage document a reference points at, with its run's tags.
 
-    A cell's genome is turned into a document with `sim.linkage_doc.to_document` in the
+    A cell's genome is turned into a document with `sim.linkage.linkage_doc.to_document` in the
     run's `mode` (param; default "paper").
 
     Raises:
@@ -129,7 +129,7 @@ def list_cells(store: RunStore, run_id: str, top: int, mode: str, buildable: boo
     """Returns the `top` lowest-loss cells of a run's repertoire with their physical checks.
 
     Args:
-        buildable: keep only cells whose linkage passes `sim.physical`'s checks.
+        buildable: keep only cells whose linkage passes `sim.linkage.physical`'s checks.
 
     Returns:
         A pandas table: cell, bins, loss, turns (fully), width and height (modules), min
@@ -139,7 +139,7 @@ def list_cells(store: RunStore, run_id: str, top: int, mode: str, buildable: boo
     import pandas as pd
 
     from linkevo.sim import decode, simulate
-    from linkevo.sim.physical import physical_checks
+    from linkevo.sim.linkage.physical import physical_checks
 
     with tempfile.TemporaryDirectory() as tmp:
         table = store.repertoire(run_id, Path(tmp))

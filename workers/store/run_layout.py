@@ -49,7 +49,7 @@ GRID_CONFIG_TOML = "grid_config.toml"
 GRID_SUMMARY = "grid_summary.json"
 """A grid parent's table of its cells (MLflow's table JSON: `columns` and `data`)."""
 BEST_JSON = "best_linkage.json"
-"""A trial's best linkage, as `sim.linkage_doc` writes it."""
+"""A trial's best linkage, as `sim.linkage.linkage_doc` writes it."""
 BEST_PNG = "best_linkage.png"
 LINKAGE_JSON = "linkage.json"
 """A linkage document where it is not a trial's best: a field trial's, the one `pull` writes."""
@@ -66,13 +66,13 @@ CHECKPOINT_DIR = "checkpoint"
 REPERTOIRE = "repertoire.parquet"
 POPULATION = "population.parquet"
 WALK_MAP = "walkmap.parquet"
-"""A repertoire trial's walk map: a row per walked cell and floor (`sim.walk_map.COLUMNS`
+"""A repertoire trial's walk map: a row per walked cell and floor (`sim.robot.walk_map.COLUMNS`
 plus the cell's bins), logged by `linkevo walkmap`, or by a walking trial (fitness F_w)
 itself."""
 WALK_MAP_PNG = "walkmap.png"
 WALK_MAP_PHYSICS = "walk_map_physics"
 """The tag of a run with a walk map: the walked robot's parameters that differ from the
-study's (`sim.robot.Physics.changed`), as JSON; "{}" for the study's robot."""
+study's (`sim.robot.hexapod.Physics.changed`), as JSON; "{}" for the study's robot."""
 WALK_PREDICTION = "walkpred.parquet"
 """A repertoire trial's predicted walks (`linkevo walkmodel predict`): a row per filled cell
 and floor (`workers.store.tables.PREDICTION_COLUMNS` plus the cell's bins); the run's tag
@@ -91,7 +91,7 @@ seconds and each floor's figures; `workers.walk_log.WalkLog`)."""
 WALK_RERANK = "walk_rerank.parquet"
 """A trial's re-ranking walks (grid key `walk_rerank`): its K best linkages walked."""
 BEST_WALKER = "best_walker.json"
-"""Of those, the furthest walker that does not break, as `sim.linkage_doc` writes it."""
+"""Of those, the furthest walker that does not break, as `sim.linkage.linkage_doc` writes it."""
 
 ID_PATTERN = re.compile(r"[A-Za-z0-9_-][A-Za-z0-9_.-]{0,63}")
 """What a run id or grid id may hold, typed or read back from a store (a grid id is 12 hex

@@ -8,7 +8,7 @@ A repertoire has a row per filled cell: cell (int64, -1 outside an archive), los
 angle_error, desc_0..desc_{D-1}, bin_0..bin_{D-1} (archives), genome (56 genes), sigma,
 foot_x and foot_y (A crank angles, NaN at failed ones), plus an approach's extras
 (`algorithms.optimizer.BaseOptimizer.view`). A walk map has a row per cell and floor:
-`sim.walk_map.COLUMNS` and the cell's bins.
+`sim.robot.walk_map.COLUMNS` and the cell's bins.
 """
 
 from __future__ import annotations
@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.sim.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.genome import N_GENES
-from linkevo.sim.robot import FLOORS
+from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
+from linkevo.sim.linkage.genome import N_GENES
+from linkevo.sim.robot.hexapod import FLOORS
 
 REPERTOIRE_COLUMNS: tuple[str, ...] = ("cell", "loss", "genome")
 """The columns every reader of a repertoire or population needs (with its bins)."""
@@ -160,8 +160,8 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
             (cell, floor) pair twice, or a sound walk (walked, not breaking) without a
             finite distance.
     """
-    from linkevo.sim.walk_map import COLUMNS as WALK_MAP_COLUMNS
-    from linkevo.sim.walk_map import STATUSES
+    from linkevo.sim.robot.walk_map import COLUMNS as WALK_MAP_COLUMNS
+    from linkevo.sim.robot.walk_map import STATUSES
     from linkevo.workers.store.run_layout import WALK_MAP
 
     remedy = (

@@ -1,0 +1,210 @@
+"""Provides `Leg`: one linkage as the 3-D robot carries it (its LEGO build where one turns,
+else the linkage as evolved), with the node paths over a fine crank turn, the rigid parts
+and the layer of every beam."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from linkevo.sim.errors import LinkevoError
+from linkevo.sim.linkage.decoding import NODE_KINDS, LinkageBatch, decode
+from linkevo.sim.linkage.kinematics import simulate
+from linkevo.sim.robot.layers import layer_plan
+from linkevo.sim.robot.lego import QuantiseError, whole_module_build
+from linkevo.sim.study import DEFAULT_ANGLES
+
+POSE_ANGLES = 360
+"""Crank angles per turn at which a leg's poses are known (one degree apart)."""
+
+
+class LegError(LinkevoError, ValueError):
+    """A linkage that cannot be walked (it does not turn a full turn); says why."""
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One leg linkage in modules, in its own frame (x, y; the crank turns counter-clockwise
+    about node 0, the motor).
+
+    Attributes:
+        paths: (M, A, 2) float64 every node's position at crank angles k*2*pi/A.
+        beams: (B, 2) int64 each beam's start and end node.
+        part: (B,) int64 the rigid part of each beam (`rigid_parts`): -1 for beams fixed
+            to the frame, else numbered from 0 in beam order; beam 0 (the crank) is in
+            part 0.
+        layer: (B,) int64 each beam's layer, 0 nearest the frame.
+        frame_nodes: (F,) int64 nodes fixed to the frame, the motor (node 0) first.
+        foot: the foot node (lowest over the turn).
+        built: True for the LEGO build (whole-module beams), False for the linkage as
+            evolved (no whole-module rounding of it turns).
+        note: why the leg is as evolved, or "" for a LEGO build.
+    """
+
+    paths: np.ndarray
+    beams: np.ndarray
+    part: np.ndarray
+    layer: np.ndarray
+    frame_nodes: np.ndarray
+    foot: int
+    built: bool
+    note: str = ""
+
+    @property
+    def n_parts(self) -> int:
+        """Moving parts (bodies), the crank included."""
+        return int(self.part.max()) + 1
+
+    def pose(self, phase: float) -> np.ndarray:
+        """Returns (M, 2) the node positions at crank angle `phase` (radians), rounded to
+        the nearest of the A sampled angles."""
+        n = self.paths.shape[1]
+        return self.paths[:, round(phase / (2 * np.pi) * n) % n]
+
+    def foot_path(self) -> np.ndarray:
+        """Returns (A, 2) the foot's path over one turn."""
+        return self.paths[self.foot]
+
+    def facing(self) -> int:
+        """Returns +1 when the foot moves towards +x over the lower half of its path (the
+        stance) as the crank turns counter-clockwise, pushing the robot towards -x, else -1.
+        A builder mounts the leg so that its stance pushes the robot forwards, so the
+        robot's front is at -x times this in the linkage's frame."""
+        path = self.foot_path()
+        low = path[:, 1] <= (path[:, 1].min() + path[:, 1].max()) / 2
+        step = np.diff(path[:, 0], append=path[:1, 0])
+        return 1 if step[low].sum() >= 0 else -1
+
+    def stance_stroke(self) -> float:
+        """Returns the stance stroke in modules: the horizontal extent of the foot path,
+        the furthest a foot that does not slip can push the robot in one stance."""
+        x = self.foot_path()[:, 0]
+        return float(x.max() - x.min())
+
+
+@dataclass(frozen=True)
+class LegRecipe:
+    """What fixes a leg: its linkage (one decoded row: the LEGO build, or the linkage as
+    evolved) and each beam's layer, with a digest of the leg it makes. Cells whose recipes
+    have one key have one leg (its poses, beams, parts, layers, frame and foot), so a walk
+    map walks it once.
+
+    Attributes:
+        batch: the linkage, one row.
+        layer: (B,) int64 each beam's layer (`sim.robot.layers.layer_plan`).
+        note: why the leg is as evolved, or "" for a LEGO build.
+        key: the digest of the leg.
+    """
+
+    batch: LinkageBatch
+    layer: np.ndarray
+    note: str
+    key: str
+
+    def leg(self) -> Leg:
+        """Returns the leg (its poses simulated at `POSE_ANGLES` crank angles)."""
+        return _leg(self.batch, simulate(self.batch, POSE_ANGLES), self.layer, self.note)
+
+
+def _leg(batch: LinkageBatch, motion, layer: np.ndarray, note: str) -> Leg:
+    """The leg of a one-row linkage, its motion at `POSE_ANGLES` and its beams' layers."""
+    n_beams = int(batch.n_beams[0])
+    beams = batch.beam_int[0, :n_beams, :2].astype(np.int64)
+    kinds = [NODE_KINDS[int(k)] for k in batch.node_int[0, :, 0]]
+    frame_nodes = [j for j, kind in enumerate(kinds) if kind in ("motor", "static")]
+    return Leg(
+        paths=motion.positions[0],
+        beams=beams,
+        part=rigid_parts(batch.node_int[0], beams, frame_nodes),
+        layer=layer,
+        frame_nodes=np.array(frame_nodes, dtype=np.int64),
+        foot=int(motion.foot[0]),
+        built=not note,
+        note=note,
+    )
+
+
+def _digest(leg: Leg) -> str:
+    """A digest of everything a walk reads of a leg."""
+    digest = hashlib.sha1(f"{leg.foot} {leg.built}".encode())
+    for array in (leg.paths, leg.beams, leg.part, leg.layer, leg.frame_nodes):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def leg_from_genome(genome: np.ndarray, mode: str = "paper") -> Leg:
+    """Returns the leg of a genome: its LEGO build (as `linkevo pull` makes it) where a
+    whole-module rounding turns, else the linkage as evolved.
+
+    Args:
+        genome: (56,) genes.
+        mode: "paper" or "legacy".
+
+    Raises:
+        LegError: when the linkage (as built and as evolved) does not turn a full turn.
+    """
+    return recipe_and_leg(genome, mode)[1]
+
+
+def leg_recipe(genome: np.ndarray, mode: str = "paper") -> LegRecipe:
+    """Returns the recipe of `leg_from_genome`'s leg; raises as it does."""
+    return recipe_and_leg(genome, mode)[0]
+
+
+def recipe_and_leg(genome: np.ndarray, mode: str = "paper") -> tuple[LegRecipe, Leg]:
+    """Returns `leg_recipe`'s recipe and `leg_from_genome`'s leg at once; raises as they do."""
+    genome = np.asarray(genome, dtype=np.float64).reshape(1, -1)
+    note = ""
+    try:
+        batch = whole_module_build(genome[0], mode)
+    except QuantiseError as exc:
+        batch, note = decode(genome, mode), f"walked as evolved: {exc}"
+    motion = simulate(batch, POSE_ANGLES)
+    valid = motion.valid[0]
+    if not valid.all():
+        raise LegError(
+            f"the linkage does not turn a full turn: it fails to assemble at "
+            f"{int((~valid).sum())} of {POSE_ANGLES} crank angles, so no robot can walk on it"
+        )
+    layer = layer_plan(batch, simulate(batch, DEFAULT_ANGLES)).layer
+    leg = _leg(batch, motion, layer, note)
+    return LegRecipe(batch=batch, layer=layer, note=note, key=_digest(leg)), leg
+
+
+def rigid_parts(node_int: np.ndarray, beams: np.ndarray, frame_nodes: list[int]) -> np.ndarray:
+    """Returns (B,) int64 the rigid part of each beam: -1 for the frame, else 0, 1, ... in
+    beam order.
+
+    The crank is a part of its own. An extension continues its parent beam's part. A
+    triangle whose two anchors already lie on one part (or both on the frame) is a rigid
+    truss: both its beams join that part. Any other beam is a part of its own, pinned at
+    both ends.
+
+    Args:
+        node_int: (12, 4) the decoded nodes [kind, a, c, direction] (`LinkageBatch`).
+        beams: (B, 2) each beam's start and end node, in decode order.
+        frame_nodes: the motor and static nodes.
+    """
+    n_beams = len(beams)
+    part = np.full(n_beams, -2, dtype=np.int64)
+    nodes_of: dict[int, set[int]] = {-1: set(frame_nodes)}
+    next_part = 0
+    for b in range(n_beams):
+        start, end = int(beams[b, 0]), int(beams[b, 1])
+        kind = NODE_KINDS[int(node_int[end, 0])]
+        if kind == "extension":
+            p = int(part[int(node_int[end, 1])])
+        elif kind == "triangle":
+            a, c = int(node_int[end, 1]), int(node_int[end, 2])
+            common = [q for q, members in nodes_of.items() if {a, c} <= members]
+            p = common[0] if common else -2
+        else:
+            p = -2
+        if p == -2:
+            p, next_part = next_part, next_part + 1
+            nodes_of[p] = set()
+        part[b] = p
+        nodes_of[p] |= {start, end}
+    return part

@@ -1,0 +1,298 @@
+"""Provides the walk map's two steps: `build_cells` (each repertoire cell's leg, or the row
+that says why it is not walked) and `walk_legs` (each distinct leg walked once per floor),
+and `walk_cells`, the two in one process.
+
+A walk-map walk is the Table I protocol's walk (`sim.robot.walking.walk` on the lean model) once,
+from the unperturbed start, instead of five times from hand-placed starts, at twice the
+physics step and with the sparse constraint Jacobian (the same walk to rounding). Repeats
+of one linkage agree within a centimetre or two except where a robot breaks, and the
+coarser step moves a distance by a few millimetres in the median (docs/walking.md), so one
+such walk ranks the cells of a map as Table I's five do, at an eighth of the cost.
+Neighbouring cells often round to the same LEGO build (the 7,514 walked cells of a study
+repertoire have 5,202 distinct legs), and the walk is deterministic, so each distinct leg
+(`LegRecipe.key`) is walked once and its rows are every such cell's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS, Physics
+from linkevo.sim.robot.leg import LegError, LegRecipe, leg_recipe
+from linkevo.sim.robot.walking import Walk, WalkSettings, walk
+
+WALK_MAP_STEP_S = 0.004
+"""A walk-map walk's physics step, twice Table I's: it ranks cells as Table I's walks do
+(docs/walking.md) at about 60 % of the cost; a walk that blows up is walked again at half
+the step, as every walk is."""
+COLUMNS = (
+    "cell",
+    "floor",
+    "status",
+    "mean_distance_cm",
+    "breaks",
+    "reason",
+    "leg",
+    "bound_cm",
+    "torque_p95_of_stall",
+    "pin_force_p99_n",
+    "seconds",
+)
+"""A walk-map row, per cell and floor. status: "walked", "not buildable" (no whole-module
+rounding of the linkage turns; walked only with `as_evolved`), "not walked" (the walking
+fitness walks no second floor for a leg that broke on the first, `sim.robot.walk_fitness`), or
+"failed" (the reason is the error)."""
+STATUSES = frozenset({"walked", "not buildable", "not walked", "failed"})
+"""Every status a walk-map row may have."""
+
+
+@dataclass(frozen=True)
+class CellBatch:
+    """Cells to walk: their flat cell numbers (N,) and genomes (N, 56), in one mode."""
+
+    cells: np.ndarray
+    genomes: np.ndarray
+    mode: str
+    floors: tuple[str, ...]
+    as_evolved: bool = False
+    seconds: float = WALK_SECONDS
+
+
+@dataclass(frozen=True)
+class BuiltCell:
+    """A cell after its leg's build: the `recipe` of the leg to walk on `floors`, or, when
+    it is not walked, its rows (it breaks without walking, is not buildable, or failed)."""
+
+    cell: int
+    floors: tuple[str, ...]
+    recipe: LegRecipe | None = None
+    rows: list[dict] = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class LegBatch:
+    """Distinct legs to walk on the same floors: their recipes, by the caller's name for
+    each."""
+
+    recipes: dict[str, LegRecipe]
+    floors: tuple[str, ...]
+    seconds: float = WALK_SECONDS
+    physics: Physics = field(default_factory=Physics)
+
+
+def walk_map_settings(seconds: float = WALK_SECONDS) -> WalkSettings:
+    """Returns how a walk-map walk is simulated: the lean model at `WALK_MAP_STEP_S`, with
+    the sparse constraint Jacobian."""
+    return WalkSettings(seconds=seconds, timestep=WALK_MAP_STEP_S, sparse=True)
+
+
+def build_cells(batch: CellBatch) -> list[BuiltCell]:
+    """Returns each cell of the batch built: its leg's recipe, or its rows.
+
+    A cell is walked as its LEGO build; when no whole-module rounding of it turns it is
+    "not buildable" and walked as evolved only with `batch.as_evolved`. A linkage that
+    does not turn a full turn breaks without being walked. Any other error is recorded as
+    the cell's "failed" row with its message, and the batch goes on.
+    """
+    out = []
+    for cell, genome in zip(batch.cells, batch.genomes, strict=True):
+        base = {"cell": int(cell), "seconds": float(batch.seconds)}
+        recipe, rows = None, []
+        try:
+            recipe = leg_recipe(genome, batch.mode)
+        except LegError as exc:
+            rows = [map_row(base, f, "walked", breaks=True, reason=str(exc)) for f in batch.floors]
+        except Exception as exc:  # recorded per cell, the batch goes on
+            rows = [map_row(base, f, "failed", reason=error_text(exc)) for f in batch.floors]
+        if recipe is not None and recipe.note and not batch.as_evolved:
+            rows = [map_row(base, f, "not buildable", reason=recipe.note) for f in batch.floors]
+            recipe = None
+        out.append(BuiltCell(int(cell), batch.floors, recipe=recipe, rows=rows))
+    return out
+
+
+def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
+    """Returns each leg's rows (one per floor, `cell` -1 until a cell takes them), by name.
+
+    A walk that raises is recorded as that floor's "failed" row with the error.
+    """
+    settings = walk_map_settings(batch.seconds)
+    out = {}
+    for key, recipe in batch.recipes.items():
+        base = {"cell": -1, "seconds": float(batch.seconds)}
+        kind = "as evolved" if recipe.note else "LEGO build"
+        try:
+            leg = recipe.leg()
+        except Exception as exc:  # recorded per leg, the batch goes on
+            out[key] = [
+                map_row(base, f, "failed", reason=error_text(exc), leg=kind) for f in batch.floors
+            ]
+            continue
+        rows = []
+        for floor in batch.floors:
+            try:
+                w = walk(leg, FLOORS[floor], settings=settings, physics=batch.physics)
+            except Exception as exc:  # recorded per leg and floor
+                rows.append(map_row(base, floor, "failed", reason=error_text(exc), leg=kind))
+                continue
+            rows.append(walked_row(base, floor, w, kind))
+        out[key] = rows
+    return out
+
+
+@dataclass(frozen=True)
+class LegToWalk:
+    """A distinct leg to walk once on `floors`, and the cells whose rows its walk is."""
+
+    recipe: LegRecipe
+    floors: tuple[str, ...]
+    cells: list[int]
+
+
+def group_legs(built: list[BuiltCell]) -> list[LegToWalk]:
+    """Returns the built cells' distinct legs (by recipe key and floors), each with its
+    cells."""
+    groups: dict[tuple[str, tuple[str, ...]], LegToWalk] = {}
+    for b in built:
+        if b.recipe is not None:
+            key = (b.recipe.key, b.floors)
+            groups.setdefault(key, LegToWalk(b.recipe, b.floors, [])).cells.append(b.cell)
+    return list(groups.values())
+
+
+def rows_for_cells(rows: list[dict], cells: list[int]) -> list[dict]:
+    """Returns a leg's rows (`walk_legs`) as every cell's that builds it."""
+    return [{**row, "cell": int(cell)} for cell in cells for row in rows]
+
+
+def leg_batches(
+    legs: list[LegToWalk], seconds: float, per_task: int, physics: Physics
+) -> list[LegBatch]:
+    """Returns the walk tasks of distinct legs (`group_legs`), `per_task` legs on the same
+    floors each, walked on the robot `physics` describes; a leg is named by its index in
+    `legs`."""
+    by_floors: dict[tuple[str, ...], list[int]] = {}
+    for i, leg in enumerate(legs):
+        by_floors.setdefault(leg.floors, []).append(i)
+    out = []
+    for floors, index in by_floors.items():
+        for start in range(0, len(index), per_task):
+            named = {str(i): legs[i].recipe for i in index[start : start + per_task]}
+            out.append(LegBatch(named, floors, seconds, physics))
+    return out
+
+
+def walk_rows(
+    run: Callable[[Callable[[Any], Any], list], Iterable[Any]],
+    batches: list[CellBatch],
+    seconds: float,
+    legs_per_task: int,
+    physics: Physics | None = None,
+) -> Iterator[tuple[int, list[dict]]]:
+    """Yields, as each task ends, how many cells it built and the rows it settled: while
+    the legs are built, the rows of the cells that are not walked; then each distinct
+    leg's walks as the rows of every cell that builds it.
+
+    Args:
+        run: runs a function over items and yields each result as it ends (here, or as
+            Ray tasks: `orchestrator.walkmap`).
+        batches: the cells.
+        seconds: each walk's length.
+        legs_per_task: distinct legs per walk task.
+        physics: the robot's parameters (default: the study's robot).
+    """
+    built = []
+    for cells in run(build_cells, batches):
+        yield len(cells), [r for b in cells for r in b.rows]
+        built += [b for b in cells if b.recipe is not None]
+    legs = group_legs(built)
+    tasks = leg_batches(legs, seconds, legs_per_task, physics or Physics())
+    for walked in run(walk_legs, tasks):
+        for name, leg_rows in walked.items():
+            yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
+
+
+def walk_cells(batch: CellBatch, physics: Physics | None = None) -> list[dict]:
+    """Returns a row (`COLUMNS`) per cell and floor of the batch, walked in this process
+    (`walk_rows` with every leg in one task) on the robot `physics` describes."""
+    legs = max(1, len(batch.cells))
+    rows = [r for _, part in walk_rows(map, [batch], batch.seconds, legs, physics) for r in part]
+    cell_order = {int(c): i for i, c in enumerate(batch.cells)}
+    return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))
+
+
+def walk_map_frame(rows: list[dict]):
+    """Returns walk-map rows (`COLUMNS`) as a pandas table with the columns' own dtypes
+    (int64 cell, bool breaks, float64 figures), also when there are none."""
+    import pandas as pd
+
+    frame = pd.DataFrame(rows, columns=list(COLUMNS))
+    return frame.astype(
+        {
+            "cell": "int64",
+            "floor": "str",
+            "status": "str",
+            "mean_distance_cm": "float64",
+            "breaks": "bool",
+            "reason": "str",
+            "leg": "str",
+            "bound_cm": "float64",
+            "torque_p95_of_stall": "float64",
+            "pin_force_p99_n": "float64",
+            "seconds": "float64",
+        }
+    )
+
+
+def walked_row(base: dict, floor: str, w: Walk, leg: str) -> dict:
+    """Returns the row of a walk on `floor` (`leg`: "LEGO build" or "as evolved")."""
+    return map_row(
+        base,
+        floor,
+        "walked",
+        distance=w.distance_m * 100,
+        breaks=w.breaks,
+        reason=w.reason,
+        leg=leg,
+        bound=w.bound_m * 100,
+        torque=w.torque_p95,
+        pins=w.pin_force_n[2],
+    )
+
+
+def map_row(
+    base: dict,
+    floor: str,
+    status: str,
+    *,
+    distance: float = math.nan,
+    breaks: bool = False,
+    reason: str = "",
+    leg: str = "",
+    bound: float = math.nan,
+    torque: float = math.nan,
+    pins: float = math.nan,
+) -> dict:
+    """Returns a row (`COLUMNS`) from `base` (its cell and seconds) and the figures."""
+    return {
+        **base,
+        "floor": floor,
+        "status": status,
+        "mean_distance_cm": float(distance),
+        "breaks": bool(breaks),
+        "reason": reason,
+        "leg": leg,
+        "bound_cm": float(bound),
+        "torque_p95_of_stall": float(torque),
+        "pin_force_p99_n": float(pins),
+    }
+
+
+def error_text(exc: Exception) -> str:
+    """The row's reason for an error: its type and message."""
+    return f"{type(exc).__name__}: {exc}"
