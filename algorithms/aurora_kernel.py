@@ -194,11 +194,21 @@ def train_epoch(
             if layer > 0:
                 input_gradient(w, g, g_in, n_in, n_out, n_blocks)
             adagrad_layer(
-                w, accumulator[offset:end_w].reshape((n_out, n_in)),
-                theta[end_w : end_w + n_out], accumulator[end_w : end_w + n_out],
-                g, work[layer], x_t, grad, zeros,
-                n_in, n_out, n_cols, lr, eps,
-            )  # fmt: skip
+                w,
+                accumulator[offset:end_w].reshape((n_out, n_in)),
+                theta[end_w : end_w + n_out],
+                accumulator[end_w : end_w + n_out],
+                g,
+                work[layer],
+                x_t,
+                grad,
+                zeros,
+                n_in,
+                n_out,
+                n_cols,
+                lr,
+                eps,
+            )
             g, g_in = g_in, g
 
 

@@ -5,7 +5,7 @@ The model is an ensemble of `MEMBERS` small multilayer perceptrons (torch), each
 from its own seed on its own bootstrap sample of the walks; the ensemble's mean is the
 prediction and its standard deviation the spread (what a search's acquisition reads,
 `workers.walk_evaluator`). Each member has four outputs: the distance on each floor of
-`FLOORS` (standardised, fitted with a Huber loss on the walks that do not break there) and
+`FLOOR_ORDER` (standardised, fitted with a Huber loss on the walks that do not break there) and
 the log-odds that the robot breaks there (binary cross-entropy on every walk on that
 floor). Distances are cm per the study's 10 s. Inputs are standardised by the training
 set's mean and spread, kept in the state dict with the weights: `state_dict` is plain
@@ -21,10 +21,8 @@ import torch
 from torch import nn
 
 from linkevo.algorithms.aurora_model import torch_threads
-from linkevo.sim.robot.walk_features import TARGET_FLOORS
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER
 
-FLOORS = TARGET_FLOORS
-"""The floors of the model's outputs, in order (`sim.robot.walk_features.walk_targets`')."""
 MEMBERS = 5
 """Networks in the ensemble."""
 HIDDEN: tuple[int, ...] = (128, 64)
@@ -41,7 +39,7 @@ WEIGHT_DECAY = 1e-4
 @dataclass(frozen=True)
 class WalkData:
     """Walks to learn from: features (N, F) float32; distance (N, 2) cm per 10 s on each
-    of `FLOORS`, NaN where the leg was not walked there or broke; breaks (N, 2) 1.0 broke,
+    of `FLOOR_ORDER`, NaN where the leg was not walked there or broke; breaks (N, 2) 1.0 broke,
     0.0 walked soundly, NaN not walked there."""
 
     features: np.ndarray
@@ -55,7 +53,7 @@ class WalkData:
 @dataclass(frozen=True)
 class Prediction:
     """The ensemble's prediction for N legs: distance (N, 2) cm per 10 s and its spread
-    (N, 2) (the members' standard deviation), and p_break (N, 2), on each of `FLOORS`."""
+    (N, 2) (the members' standard deviation), and p_break (N, 2), on each of `FLOOR_ORDER`."""
 
     distance: np.ndarray
     spread: np.ndarray
@@ -68,7 +66,7 @@ def _member(n_features: int) -> nn.Sequential:
     for units in HIDDEN:
         layers += [nn.Linear(width, units), nn.ReLU()]
         width = units
-    return nn.Sequential(*layers, nn.Linear(width, 2 * len(FLOORS)))
+    return nn.Sequential(*layers, nn.Linear(width, 2 * len(FLOOR_ORDER)))
 
 
 class WalkModel:
@@ -84,8 +82,8 @@ class WalkModel:
         self.members = [_member(n_features) for _ in range(members)]
         self.feature_mean = torch.zeros(n_features)
         self.feature_scale = torch.ones(n_features)
-        self.distance_mean = torch.zeros(len(FLOORS))
-        self.distance_scale = torch.ones(len(FLOORS))
+        self.distance_mean = torch.zeros(len(FLOOR_ORDER))
+        self.distance_scale = torch.ones(len(FLOOR_ORDER))
 
     def fit(self, data: WalkData, seed: int = 0) -> WalkModel:
         """Trains every member on its bootstrap sample of `data`; returns the model."""
@@ -96,7 +94,7 @@ class WalkModel:
         self.feature_scale = x.std(dim=0).clamp_min(1e-6)
         d = torch.from_numpy(np.asarray(data.distance, np.float32))
         sound = ~torch.isnan(d)
-        for k in range(len(FLOORS)):
+        for k in range(len(FLOOR_ORDER)):
             values = d[sound[:, k], k]
             if len(values) > 1:
                 self.distance_mean[k] = values.mean()
@@ -117,8 +115,16 @@ class WalkModel:
                             layer.weight.uniform_(-bound, bound, generator=generator)
                             layer.bias.uniform_(-bound, bound, generator=generator)
                 sample = torch.randint(len(x), (len(x),), generator=generator)
-                _train(member, x[sample], d[sample], sound[sample], b[sample], seen[sample],
-                       generator, steps)  # fmt: skip
+                _train(
+                    member,
+                    x[sample],
+                    d[sample],
+                    sound[sample],
+                    b[sample],
+                    seen[sample],
+                    generator,
+                    steps,
+                )
         return self
 
     @torch.no_grad()
@@ -128,7 +134,7 @@ class WalkModel:
         x = (x - self.feature_mean) / self.feature_scale
         with torch_threads(1):
             out = torch.stack([m(x) for m in self.members])  # (M, N, 4)
-        n = len(FLOORS)
+        n = len(FLOOR_ORDER)
         distance = out[..., :n] * self.distance_scale + self.distance_mean
         p_break = torch.sigmoid(out[..., n:]).mean(dim=0)
         return Prediction(
@@ -171,7 +177,7 @@ class WalkModel:
 def _train(member: nn.Sequential, x, d, sound, b, seen, generator, steps: int) -> None:
     """Fits one member: Huber on the sound distances, cross-entropy on the breaks."""
     optimiser = torch.optim.Adam(member.parameters(), lr=LEARNING_RATE, weight_decay=WEIGHT_DECAY)
-    n = len(FLOORS)
+    n = len(FLOOR_ORDER)
     huber = nn.HuberLoss(reduction="none")
     entropy = nn.BCEWithLogitsLoss(reduction="none")
     for _ in range(steps):

@@ -77,8 +77,10 @@ def main() -> None:
             continue
         legs.append(leg)
         inertia = reflected(leg, SHIPPED)
-        print(f"leg {len(legs)}: armature at the crank {inertia.mean() / rotor:.1%} of the "
-              f"rotor's on average, {inertia.max() / rotor:.1%} at most")  # fmt: skip
+        print(
+            f"leg {len(legs)}: armature at the crank {inertia.mean() / rotor:.1%} of the "
+            f"rotor's on average, {inertia.max() / rotor:.1%} at most"
+        )
     settings = walk_map_settings()
     for floor in FLOORS:
         got = {}
@@ -88,14 +90,20 @@ def main() -> None:
         lean_model.CONTACT_INERTIA_KG = SHIPPED
         base = got["shipped"]
         for name in ("a tenth", "none"):
-            diff = [abs(a.distance_m - b.distance_m) * 100 for a, b in zip(got[name], base,
-                                                                          strict=True)]  # fmt: skip
+            diff = [
+                abs(a.distance_m - b.distance_m) * 100 for a, b in zip(got[name], base, strict=True)
+            ]
             flips = sum(a.breaks != b.breaks for a, b in zip(got[name], base, strict=True))
-            print(f"{floor}, {name} against shipped: distance difference median "
-                  f"{np.median(diff):.1f} cm, largest {max(diff):.1f} cm; {flips} of "
-                  f"{len(legs)} break verdicts change")  # fmt: skip
-        print(f"{floor}, shipped: distances " + ", ".join(f"{w.distance_m * 100:.0f}" for w in base)
-              + " cm")  # fmt: skip
+            print(
+                f"{floor}, {name} against shipped: distance difference median "
+                f"{np.median(diff):.1f} cm, largest {max(diff):.1f} cm; {flips} of "
+                f"{len(legs)} break verdicts change"
+            )
+        print(
+            f"{floor}, shipped: distances "
+            + ", ".join(f"{w.distance_m * 100:.0f}" for w in base)
+            + " cm"
+        )
 
 
 if __name__ == "__main__":

@@ -77,11 +77,14 @@ def compare_loops(
     steps = epochs * -(-paths.shape[0] // settings.ae_batch_size)
     models = {
         name: PathAutoencoder(
-            n_inputs=paths.shape[1], seed=seed, device="cpu", threads=settings.threads,
+            n_inputs=paths.shape[1],
+            seed=seed,
+            device="cpu",
+            threads=settings.threads,
             loop="torch" if name == "torch" else "compiled",
         )
         for name in ("compiled", "fast_math", "torch")
-    }  # fmt: skip
+    }
     plain = reference_module(models["torch"].state_dict())
     kernels = {"compiled": aurora_model.train_epoch, "fast_math": fast_math_epoch()}
     timed = {}

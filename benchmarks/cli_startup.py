@@ -35,8 +35,11 @@ def seconds(words: list[str], env: dict[str, str] | None) -> float:
     start = time.perf_counter()
     subprocess.run(
         [sys.executable, "-m", "linkevo.orchestrator", *words],
-        cwd=REPO, env=env, capture_output=True, check=True,
-    )  # fmt: skip
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        check=True,
+    )
     return time.perf_counter() - start
 
 
@@ -57,8 +60,10 @@ def main() -> None:
                 for tree, env in trees.items():
                     times[tree].append(seconds(words, env))
             for tree, values in times.items():
-                print(f"{name}, {tree}: median {statistics.median(values):.2f} s "
-                      f"(min {min(values):.2f}, max {max(values):.2f})")  # fmt: skip
+                print(
+                    f"{name}, {tree}: median {statistics.median(values):.2f} s "
+                    f"(min {min(values):.2f}, max {max(values):.2f})"
+                )
             if args.against is not None:
                 ratios = [a / b for a, b in zip(*times.values(), strict=True)]
                 print(f"  this tree / {args.against}: median ratio {statistics.median(ratios):.2f}")

@@ -107,13 +107,19 @@ def run_grid(cfg: Path, uri: str, db_uri: str, work: Path) -> None:
     start = time.perf_counter()
     trial_runs(client, experiment.experiment_id, grid.grid_id)
     read_all = time.perf_counter() - start
-    print(f"grid of {len(runs)} trials: {wall:.1f} s wall (exit {done.returncode}), "
-          f"fan-out {span:.1f} s")  # fmt: skip
+    print(
+        f"grid of {len(runs)} trials: {wall:.1f} s wall (exit {done.returncode}), "
+        f"fan-out {span:.1f} s"
+    )
     split = ", ".join(f"{t} {n / len(runs):.0f}" for t, n in rows.items())
-    print(f"  sustained: {len(runs) / span:.2f} trials/s, "
-          f"{sum(rows.values()) / span:,.0f} rows written/s ({split} per trial)")  # fmt: skip
-    print(f"  reading the grid's {len(runs)} trial runs back: {read_all * 1e3:.0f} ms "
-          f"({read_all / len(runs) * 1e6:.0f} us per run)")  # fmt: skip
+    print(
+        f"  sustained: {len(runs) / span:.2f} trials/s, "
+        f"{sum(rows.values()) / span:,.0f} rows written/s ({split} per trial)"
+    )
+    print(
+        f"  reading the grid's {len(runs)} trial runs back: {read_all * 1e3:.0f} ms "
+        f"({read_all / len(runs) * 1e6:.0f} us per run)"
+    )
 
 
 def time_client_calls() -> tuple[dict[str, list[float]], callable]:
@@ -152,10 +158,18 @@ def trial_breakdown(cfg: Path, uri: str, work: Path, n: int = 20) -> None:
     start = time.perf_counter()
     try:
         for i, (key, spec) in enumerate(specs):
-            job = TrialJob(tracking_uri=uri, experiment_id=experiment_id, parent_run_id=parent,
-                           grid_id=f"bench-{time.time_ns()}", trial_key=key, trial_index=i,
-                           spec=spec, out_dir=str(work / "in-process" / str(i)), evaluators=0,
-                           cpus_per_evaluator=1.0)  # fmt: skip
+            job = TrialJob(
+                tracking_uri=uri,
+                experiment_id=experiment_id,
+                parent_run_id=parent,
+                grid_id=f"bench-{time.time_ns()}",
+                trial_key=key,
+                trial_index=i,
+                spec=spec,
+                out_dir=str(work / "in-process" / str(i)),
+                evaluators=0,
+                cpus_per_evaluator=1.0,
+            )
             run_trial_job(job)
     finally:
         undo()
@@ -164,12 +178,16 @@ def trial_breakdown(cfg: Path, uri: str, work: Path, n: int = 20) -> None:
     # in both; the split lists the calls a trial makes itself.
     calls = sorted(timings.items(), key=lambda kv: -sum(kv[1]))
     tracked = sum(sum(v) for _, v in calls) / len(specs)
-    print(f"one trial in process: {per_trial * 1e3:.0f} ms, of which MLflow calls "
-          f"{tracked * 1e3:.0f} ms ({tracked / per_trial:.0%})")  # fmt: skip
+    print(
+        f"one trial in process: {per_trial * 1e3:.0f} ms, of which MLflow calls "
+        f"{tracked * 1e3:.0f} ms ({tracked / per_trial:.0%})"
+    )
     for name, values in calls[:8]:
-        print(f"  {name:<18} {len(values) / len(specs):5.1f} calls  "
-              f"{sum(values) / len(specs) * 1e3:7.1f} ms per trial  "
-              f"({sum(values) / len(values) * 1e3:.1f} ms each)")  # fmt: skip
+        print(
+            f"  {name:<18} {len(values) / len(specs):5.1f} calls  "
+            f"{sum(values) / len(specs) * 1e3:7.1f} ms per trial  "
+            f"({sum(values) / len(values) * 1e3:.1f} ms each)"
+        )
 
 
 def write_capacity(uri: str, clients: int, seconds: float = 15.0) -> float:
@@ -209,8 +227,10 @@ def bench_store(name: str, uri: str, db_uri: str, args: argparse.Namespace, work
     trial_breakdown(cfg, uri, work)
     one = write_capacity(uri, 1)
     many = write_capacity(uri, args.clients)
-    print(f"write capacity: {one:.0f} runs/s with 1 client, {many:.0f} runs/s with "
-          f"{args.clients} clients ({many / one:.1f}x)")  # fmt: skip
+    print(
+        f"write capacity: {one:.0f} runs/s with 1 client, {many:.0f} runs/s with "
+        f"{args.clients} clients ({many / one:.1f}x)"
+    )
 
 
 def main() -> None:
@@ -218,8 +238,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=240)
     parser.add_argument("--clients", type=int, default=8)
-    parser.add_argument("--stores", nargs="+", choices=["sqlite", "server"],
-                        default=["sqlite", "server"])  # fmt: skip
+    parser.add_argument(
+        "--stores", nargs="+", choices=["sqlite", "server"], default=["sqlite", "server"]
+    )
     args = parser.parse_args()
     ray.init(address="local", num_cpus=1, include_dashboard=False)  # run_trial_job tags its node
     with tempfile.TemporaryDirectory() as tmp:
@@ -233,8 +254,13 @@ def main() -> None:
             state = up(ClusterSettings(dir=work / "cluster", workers=1))
             try:
                 (work / "server").mkdir()
-                bench_store("MLflow server on PostgreSQL", state.tracking_uri,
-                            state.database_uri, args, work / "server")  # fmt: skip
+                bench_store(
+                    "MLflow server on PostgreSQL",
+                    state.tracking_uri,
+                    state.database_uri,
+                    args,
+                    work / "server",
+                )
             finally:
                 down(work / "cluster")
     ray.shutdown()

@@ -107,8 +107,10 @@ def measure(address: str, nodes: list[str], spec: TrialSpec, repeats: int) -> No
                 best[name] = (seconds, loss)
     ray.shutdown()
     base = best["own task, 2 threads"][0]
-    print(f"MAP-LIS F_p, {spec.evaluations:,} evaluations, batches of {spec.batch_size:,}; "
-          f"2 worker nodes x 2 CPUs on {os.cpu_count()} cores; best of {repeats}")  # fmt: skip
+    print(
+        f"MAP-LIS F_p, {spec.evaluations:,} evaluations, batches of {spec.batch_size:,}; "
+        f"2 worker nodes x 2 CPUs on {os.cpu_count()} cores; best of {repeats}"
+    )
     print(f"{'set-up':<36} {'seconds':>8} {'ratio':>6} {'best loss':>10}")
     for name, (seconds, loss) in best.items():
         print(f"{name:<36} {seconds:8.2f} {seconds / base:6.2f} {loss:10.4f}")
@@ -127,9 +129,17 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as work:
         state = up(ClusterSettings(dir=Path(work) / "cluster", workers=2, cpus_per_worker=2))
         try:
-            command = [sys.executable, __file__, "--evaluations", str(args.evaluations),
-                       "--repeats", str(args.repeats), "--join", state.address,
-                       *(n.node_id for n in state.workers)]  # fmt: skip
+            command = [
+                sys.executable,
+                __file__,
+                "--evaluations",
+                str(args.evaluations),
+                "--repeats",
+                str(args.repeats),
+                "--join",
+                state.address,
+                *(n.node_id for n in state.workers),
+            ]
             subprocess.run(command, env={**os.environ, **state.env}, check=True)
         finally:
             down(Path(work) / "cluster")

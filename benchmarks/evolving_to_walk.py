@@ -110,8 +110,9 @@ def fw_arms(store: RunStore, grid: str, tmp: Path) -> list[dict]:
     return out
 
 
-def walk_map_arm(store: RunStore, grid: str, trials: int, times: dict[str, float],
-                 cores: int, tmp: Path) -> list[dict]:  # fmt: skip
+def walk_map_arm(
+    store: RunStore, grid: str, trials: int, times: dict[str, float], cores: int, tmp: Path
+) -> list[dict]:
     runs = latest_per_trial(store.trial_table(grid))
     runs = runs[(runs["tags.approach"] == "MAP-LIS") & (runs["tags.fitness"] == "Fp")]
     runs = runs.sort_values("tags.trial_key").head(trials)
@@ -193,8 +194,11 @@ def main() -> None:
     parser.add_argument("--walkmap-times", type=Path, default=None)
     parser.add_argument("--cores", type=int, default=2)
     parser.add_argument("--out", type=Path, default=None)
-    parser.add_argument("--surrogate-grid", default=None, help="the same MAP-LIS F_w trials "
-                        "with surrogate = true, in --fw-uri")  # fmt: skip
+    parser.add_argument(
+        "--surrogate-grid",
+        default=None,
+        help="the same MAP-LIS F_w trials with surrogate = true, in --fw-uri",
+    )
     args = parser.parse_args()
     times = {}
     if args.walkmap_times is not None:
@@ -209,11 +213,19 @@ def main() -> None:
             )
             print("surrogate = true against plain MAP-LIS F_w (the same seeds):")
             print(reach.round(2).to_string(index=False))
-            print(f"median fewer walks: {reach.fewer_walks_qd.median():.2f}x to the QD-score, "
-                  f"{reach.fewer_walks_best.median():.2f}x to the best walker")  # fmt: skip
+            print(
+                f"median fewer walks: {reach.fewer_walks_qd.median():.2f}x to the QD-score, "
+                f"{reach.fewer_walks_best.median():.2f}x to the best walker"
+            )
         rows = fw_arms(RunStore.open(args.fw_uri), args.fw_grid, Path(tmp))
-        rows += walk_map_arm(RunStore.open(args.study_uri), args.study_grid, args.trials,
-                             times, args.cores, Path(tmp))  # fmt: skip
+        rows += walk_map_arm(
+            RunStore.open(args.study_uri),
+            args.study_grid,
+            args.trials,
+            times,
+            args.cores,
+            Path(tmp),
+        )
     trials = pd.DataFrame(rows).assign(status="FINISHED", fitness="walk", approach=lambda f: f.arm)
     summary = trials.groupby("arm", sort=False)[[*MEASURES, "walks", "core_s"]].median()
     print("medians per arm:")
@@ -224,8 +236,19 @@ def main() -> None:
         found["verdict"] = [judge(r, lower=False) for _, r in found.iterrows()]
         tests.append(found.assign(measure=measure))
     tests = pd.concat(tests, ignore_index=True)
-    cols = ["measure", "family", "approach_a", "approach_b", "median_a", "median_b", "a12",
-            "a12_low", "a12_high", "p_holm", "verdict"]  # fmt: skip
+    cols = [
+        "measure",
+        "family",
+        "approach_a",
+        "approach_b",
+        "median_a",
+        "median_b",
+        "a12",
+        "a12_low",
+        "a12_high",
+        "p_holm",
+        "verdict",
+    ]
     print("\npairs (verdict on 'a does better than b', the report's rule):")
     print(tests[cols].round(3).to_string(index=False))
     if args.out is not None:

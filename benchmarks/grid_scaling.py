@@ -185,8 +185,16 @@ def tracking_overhead(work: Path, iterations: int, rounds: int = 11) -> None:
 def quick_grid_seconds(tree: Path, store: Path, work: Path) -> float:
     """Runs `linkevo grid configs/quick.toml` of the code in `tree` on a fresh `store`
     (`benchmarks.trees.tree_env`); returns its wall time in seconds."""
-    command = [sys.executable, "-m", "linkevo.orchestrator", "grid", "configs/quick.toml",
-               "--tracking-uri", str(store), "--no-progress"]  # fmt: skip
+    command = [
+        sys.executable,
+        "-m",
+        "linkevo.orchestrator",
+        "grid",
+        "configs/quick.toml",
+        "--tracking-uri",
+        str(store),
+        "--no-progress",
+    ]
     env = tree_env(tree, work)
     start = time.perf_counter()
     done = subprocess.run(command, capture_output=True, text=True, cwd=tree, env=env, check=False)
@@ -222,8 +230,10 @@ def quick_preset(work: Path, against: Path | None, rounds: int) -> None:
             times[name].append(quick_grid_seconds(tree, store, work))
     for name, values in times.items():
         shown = ", ".join(f"{v:.1f}" for v in values)
-        print(f"wall time of linkevo grid configs/quick.toml, {name}: {shown} s "
-              f"(median {np.median(values):.1f} s)")  # fmt: skip
+        print(
+            f"wall time of linkevo grid configs/quick.toml, {name}: {shown} s "
+            f"(median {np.median(values):.1f} s)"
+        )
     if against:
         ratios = [a / b for a, b in zip(*times.values(), strict=True)]
         print(f"this tree / {against}: median ratio {np.median(ratios):.3f} over {rounds} pair(s)")
@@ -240,13 +250,19 @@ def quick_preset(work: Path, against: Path | None, rounds: int) -> None:
     numba.set_num_threads(1)
     loops = []
     for key, spec in specs.items():
-        result = run_trial(spec, LocalEvaluator(spec.eval_fitness, spec.mode), NullRecorder(),
-                           work / "in-process" / key.replace("/", "-"))  # fmt: skip
+        result = run_trial(
+            spec,
+            LocalEvaluator(spec.eval_fitness, spec.mode),
+            NullRecorder(),
+            work / "in-process" / key.replace("/", "-"),
+        )
         loops.append(sum(result.timings[phase] for phase in LOOP_PHASES))
     per_slot = fan_out * slots / len(runs)
     loop = float(np.mean(loops))
-    print(f"fan-out {fan_out:.1f} s for {len(runs)} trials, {slots} at once: {per_slot:.2f} "
-          f"slot-seconds per trial; the trial loop in process {loop:.2f} s")  # fmt: skip
+    print(
+        f"fan-out {fan_out:.1f} s for {len(runs)} trials, {slots} at once: {per_slot:.2f} "
+        f"slot-seconds per trial; the trial loop in process {loop:.2f} s"
+    )
     print(f"grid overhead per trial: {per_slot - loop:.2f} s (target <= 0.5 s)")
 
 

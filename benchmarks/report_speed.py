@@ -54,9 +54,11 @@ def naive_load(uri: str, grid_id: str, dst: Path) -> int:
         names = [a.path for a in client.list_artifacts(run.info.run_id)]
         archive = next(n for n in names if n.endswith(".parquet"))
         local = mlflow.artifacts.download_artifacts(
-            run_id=run.info.run_id, artifact_path=archive, dst_path=str(dst / run.info.run_id),
+            run_id=run.info.run_id,
+            artifact_path=archive,
+            dst_path=str(dst / run.info.run_id),
             tracking_uri=uri,
-        )  # fmt: skip
+        )
         pd.read_parquet(local)
     return points
 

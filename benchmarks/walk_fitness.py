@@ -55,16 +55,31 @@ def one_core(command: list[str], env: dict[str, str]) -> str:
     its standard output."""
     core = str(min(os.sched_getaffinity(0)))
     env = {**env, "NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}
-    done = subprocess.run(["taskset", "-c", core, *command], env=env, capture_output=True,
-                          text=True, check=True)  # fmt: skip
+    done = subprocess.run(
+        ["taskset", "-c", core, *command], env=env, capture_output=True, text=True, check=True
+    )
     return done.stdout
 
 
 def per_candidate(args: argparse.Namespace, work: Path) -> None:
     trial = work / "search"
-    linkevo = [sys.executable, "-m", "linkevo.orchestrator", "trial", "--approach", "MAP-LIS",
-               "--fitness", "Fw", "--walks", str(args.walks), "--seed", "1", "--no-progress",
-               "--out", str(trial)]  # fmt: skip
+    linkevo = [
+        sys.executable,
+        "-m",
+        "linkevo.orchestrator",
+        "trial",
+        "--approach",
+        "MAP-LIS",
+        "--fitness",
+        "Fw",
+        "--walks",
+        str(args.walks),
+        "--seed",
+        "1",
+        "--no-progress",
+        "--out",
+        str(trial),
+    ]
     one_core(linkevo, tree_env(HERE.parent, work))
     log = pd.read_parquet(trial / "walks.parquet")
     walked = log[log["stage"] == "walked"]
@@ -74,9 +89,11 @@ def per_candidate(args: argparse.Namespace, work: Path) -> None:
     n = len(genomes)
     search = float(walked["compute_s"].sum()) / n
     skipped = walked["flat_status"].eq("not walked")
-    print(f"{n} candidates walked by a MAP-LIS F_w trial (seed 1), one core: "
-          f"{int(skipped.sum())} not walked on flat "
-          f"({int((skipped & walked['flat_breaks']).sum())} broke on carpet)")  # fmt: skip
+    print(
+        f"{n} candidates walked by a MAP-LIS F_w trial (seed 1), one core: "
+        f"{int(skipped.sum())} not walked on flat "
+        f"({int((skipped & walked['flat_breaks']).sum())} broke on carpet)"
+    )
     trees = [("this tree", HERE.parent)]
     if args.against is not None:
         trees.insert(0, (str(args.against), args.against))
@@ -108,8 +125,10 @@ def actors(args: argparse.Namespace, work: Path) -> None:
             seconds = time.perf_counter() - start
         walks = int(result.metrics["walks"])
         rates[k] = walks / seconds
-        print(f"{k} evaluator actor(s): {walks} walked candidates in {seconds:.1f} s, "
-              f"{rates[k]:.2f} walks/s")  # fmt: skip
+        print(
+            f"{k} evaluator actor(s): {walks} walked candidates in {seconds:.1f} s, "
+            f"{rates[k]:.2f} walks/s"
+        )
     print(f"2 actors over 1: {rates[2] / rates[1]:.2f}x")
     ray.shutdown()
 

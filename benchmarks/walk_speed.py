@@ -144,10 +144,20 @@ def against(args: argparse.Namespace) -> None:
                 for _ in range(args.repeats):
                     for tree, env in trees.items():
                         done = subprocess.run(
-                            [sys.executable, "-c", TIMED_WALK, str(args.linkage.resolve()), name,
-                             model, str(args.seconds)],
-                            env=env, capture_output=True, text=True, check=True,
-                        )  # fmt: skip
+                            [
+                                sys.executable,
+                                "-c",
+                                TIMED_WALK,
+                                str(args.linkage.resolve()),
+                                name,
+                                model,
+                                str(args.seconds),
+                            ],
+                            env=env,
+                            capture_output=True,
+                            text=True,
+                            check=True,
+                        )
                         seconds, distance = map(float, done.stdout.split())
                         if tree not in best or seconds < best[tree][0]:
                             best[tree] = (seconds, distance)

@@ -27,10 +27,10 @@ import numpy as np
 from scipy.stats import spearmanr
 
 from linkevo.orchestrator.walkmap import Selection
-from linkevo.sim.robot.hexapod import FLOORS
+from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS
 from linkevo.sim.robot.leg import leg_from_genome
 from linkevo.sim.robot.walk_fitness import search_walk_settings
-from linkevo.sim.robot.walk_map import WALK_SECONDS, walk_map_settings
+from linkevo.sim.robot.walk_map import walk_map_settings
 from linkevo.sim.robot.walking import WalkSettings, field_trials, walk
 from linkevo.workers.store.runs import RunStore
 

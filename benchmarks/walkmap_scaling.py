@@ -23,7 +23,7 @@ import time
 from pathlib import Path
 
 from linkevo.orchestrator.walkmap import Selection, plan, run_in_process, run_on_ray, walk_rows
-from linkevo.sim.robot.walk_map import WALK_SECONDS
+from linkevo.sim.robot.hexapod import WALK_SECONDS
 from linkevo.workers.store.runs import RunStore
 
 FLOORS = ("flat", "carpet")

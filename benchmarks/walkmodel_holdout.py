@@ -35,12 +35,16 @@ def main() -> None:
         model = WalkModel(len(FEATURE_NAMES)).fit(train, seed=args.seed)
         found = figures(model.predict(held.data.features), held.data)
         rows.append((found["spearman_flat"], found["spearman_carpet"], found["break_auc"]))
-        print(f"{held.trial.trial_key:16s} {len(held.cells):6d} cells   Spearman flat "
-              f"{rows[-1][0]:.3f}  carpet {rows[-1][1]:.3f}   break AUC {rows[-1][2]:.3f}",
-              flush=True)  # fmt: skip
+        print(
+            f"{held.trial.trial_key:16s} {len(held.cells):6d} cells   Spearman flat "
+            f"{rows[-1][0]:.3f}  carpet {rows[-1][1]:.3f}   break AUC {rows[-1][2]:.3f}",
+            flush=True,
+        )
     flat, carpet, auc = np.nanmedian(np.array(rows), axis=0)
-    print(f"{'median':16s} {'':12s} Spearman flat {flat:.3f}  carpet {carpet:.3f}   "
-          f"break AUC {auc:.3f}")  # fmt: skip
+    print(
+        f"{'median':16s} {'':12s} Spearman flat {flat:.3f}  carpet {carpet:.3f}   "
+        f"break AUC {auc:.3f}"
+    )
 
 
 if __name__ == "__main__":

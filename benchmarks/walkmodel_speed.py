@@ -76,11 +76,15 @@ def main() -> None:
     walk_s = per_cell * args.cells
     print(f"{args.cells} buildable cells (paper mode), one core:")
     print(f"  walk model: {predict_s:.2f} s (features {features_s:.2f} s; goal <= 2 s)")
-    print(f"  LEGO builds: {builds_s:.2f} s ({builds_s / args.cells * 1e3:.3f} ms a cell); "
-          f"the exhaustive search {plain_per_cell * 1e3:.1f} ms a cell ({args.sample} cells): "
-          f"{plain_per_cell * args.cells / builds_s:,.0f}x")  # fmt: skip
-    print(f"  walk map: {per_cell:.3f} s per cell ({args.sample} built and walked 10 s on both "
-          f"floors) = {walk_s / 60:.1f} min for every cell")  # fmt: skip
+    print(
+        f"  LEGO builds: {builds_s:.2f} s ({builds_s / args.cells * 1e3:.3f} ms a cell); "
+        f"the exhaustive search {plain_per_cell * 1e3:.1f} ms a cell ({args.sample} cells): "
+        f"{plain_per_cell * args.cells / builds_s:,.0f}x"
+    )
+    print(
+        f"  walk map: {per_cell:.3f} s per cell ({args.sample} built and walked 10 s on both "
+        f"floors) = {walk_s / 60:.1f} min for every cell"
+    )
     print(f"  prediction is {walk_s / predict_s:,.0f}x faster than walking")
 
 

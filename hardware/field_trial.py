@@ -228,8 +228,13 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
         floor, robot = tags.get("floor", "?"), tags.get("robot", "first")
         if floor not in floors:
             floors.append(floor)
-        i = _row(rows, tags.get(layout.APPROACH, "unknown"), tags.get(SOURCE_GRID, ""), robot,
-                 _walked(tags))  # fmt: skip
+        i = _row(
+            rows,
+            tags.get(layout.APPROACH, "unknown"),
+            tags.get(SOURCE_GRID, ""),
+            robot,
+            _walked(tags),
+        )
         key = (i, robot, floor)
         history = [m.value for m in client.get_metric_history(run.info.run_id, "distance_cm")]
         if kind == PHYSICS:

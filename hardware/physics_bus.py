@@ -136,9 +136,15 @@ class PhysicsMotor(EmulatedMotor):
     speed and load are the physics', its commands drive the crank."""
 
     def __init__(
-        self, world: PhysicsWorld, motor_id: int, direction: int, zero: int, *, now: float,
+        self,
+        world: PhysicsWorld,
+        motor_id: int,
+        direction: int,
+        zero: int,
+        *,
+        now: float,
         **kwargs,
-    ) -> None:  # fmt: skip
+    ) -> None:
         self.world, self.direction, self.zero = world, direction, zero
         self._offset = 0.0  # position re-wraps (as the firmware does) shift the count
         self._limit_since: float | None = None

@@ -296,8 +296,12 @@ def _validate(cfg: GridConfig) -> None:
     _check_choices(cfg, "fitnesses", SINGLE_FITNESSES, many=True)
     walking = WALKING_FITNESS in cfg.fitnesses
     if walking and cfg.walks < 1:
-        raise _fail("walks", cfg.walks, "allowed: an integer >= 1 with fitness Fw (walked "
-                    "candidates per trial, e.g. --set walks=2000)")  # fmt: skip
+        raise _fail(
+            "walks",
+            cfg.walks,
+            "allowed: an integer >= 1 with fitness Fw (walked "
+            "candidates per trial, e.g. --set walks=2000)",
+        )
     if not walking and cfg.walks:
         raise _fail("walks", cfg.walks, 'allowed: 0 unless fitnesses holds "Fw"')
     if not isinstance(cfg.seed_from, str):

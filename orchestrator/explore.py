@@ -39,6 +39,7 @@ from linkevo.sim.linkage.decoding import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.linkage.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from linkevo.sim.robot.hexapod import in_floor_order
+from linkevo.sim.robot.walk_rows import Status
 from linkevo.sim.study import FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
@@ -171,7 +172,7 @@ def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str]
     page's [distance cm, breaks 0/1, reason, beyond the level-body bound 0/1]."""
     if walks is None or walks.empty:
         return [], {}
-    walks = walks[walks["status"] == "walked"]
+    walks = walks[walks["status"] == Status.WALKED]
     floors = in_floor_order(walks["floor"].unique())
     bound = walks["bound_cm"].to_numpy(dtype=float)
     beyond = np.isfinite(bound) & (walks["mean_distance_cm"].to_numpy(dtype=float) > bound)

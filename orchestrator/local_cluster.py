@@ -255,8 +255,13 @@ def _start_postgres(state: ClusterState) -> None:
     data = state.pg_data
     _pg(state, "initdb", f"-D {data} -U {DB_USER} --auth=trust -E UTF8 --no-instructions")
     listen = f"-h 127.0.0.1 -p {state.postgres_port} -k {data}"
-    _pg(state, "pg_ctl", f"start -D {data} -w -t {START_TIMEOUT_S:.0f} -l {data}/server.log",
-        "-o", listen)  # fmt: skip
+    _pg(
+        state,
+        "pg_ctl",
+        f"start -D {data} -w -t {START_TIMEOUT_S:.0f} -l {data}/server.log",
+        "-o",
+        listen,
+    )
     _pg(state, "createdb", f"-h 127.0.0.1 -p {state.postgres_port} -U {DB_USER} {DATABASE}")
 
 
@@ -264,12 +269,24 @@ def _start_mlflow(state: ClusterState, workers: int) -> None:
     artifacts = Path(state.dir, "artifacts")
     artifacts.mkdir(exist_ok=True)
     command = [
-        sys.executable, "-m", "mlflow", "server",
-        "--backend-store-uri", state.database_uri,
-        "--serve-artifacts", "--artifacts-destination", str(artifacts),
-        "--host", "127.0.0.1", "--port", str(state.mlflow_port),
-        "--workers", str(workers), "--gunicorn-opts", "--log-level warning",
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "mlflow",
+        "server",
+        "--backend-store-uri",
+        state.database_uri,
+        "--serve-artifacts",
+        "--artifacts-destination",
+        str(artifacts),
+        "--host",
+        "127.0.0.1",
+        "--port",
+        str(state.mlflow_port),
+        "--workers",
+        str(workers),
+        "--gunicorn-opts",
+        "--log-level warning",
+    ]
     # gunicorn, not the default uvicorn: through uvicorn each request on a kept-alive
     # connection (the MLflow client's) took about 60 ms on loopback against 12 ms here
     # (docs/scale.md). The background job runner (GenAI jobs) is not needed by linkevo.
@@ -287,13 +304,37 @@ def _wait_for_mlflow(state: ClusterState) -> None:
 def _start_ray(state: ClusterState, settings: ClusterSettings) -> None:
     ray = str(Path(sys.executable).with_name("ray"))
     env = {**os.environ, **state.env, "RAY_USAGE_STATS_ENABLED": "0"}
-    common = ["--block", "--node-ip-address", "127.0.0.1", "--disable-usage-stats",
-              "--object-store-memory", str(settings.object_store_mb * 2**20)]  # fmt: skip
-    head = [ray, "start", "--head", "--port", str(state.ray_port), "--num-cpus",
-            str(settings.head_cpus), "--include-dashboard", "false", "--temp-dir",
-            state.ray_temp, *common]  # fmt: skip
-    worker = [ray, "start", "--address", state.address, "--num-cpus",
-              str(settings.cpus_per_worker), *common]  # fmt: skip
+    common = [
+        "--block",
+        "--node-ip-address",
+        "127.0.0.1",
+        "--disable-usage-stats",
+        "--object-store-memory",
+        str(settings.object_store_mb * 2**20),
+    ]
+    head = [
+        ray,
+        "start",
+        "--head",
+        "--port",
+        str(state.ray_port),
+        "--num-cpus",
+        str(settings.head_cpus),
+        "--include-dashboard",
+        "false",
+        "--temp-dir",
+        state.ray_temp,
+        *common,
+    ]
+    worker = [
+        ray,
+        "start",
+        "--address",
+        state.address,
+        "--num-cpus",
+        str(settings.cpus_per_worker),
+        *common,
+    ]
     # One node at a time: raylets that start together on one host time out registering.
     plan = [("head", head, settings.head_cpus)]
     plan += [("worker", worker, settings.cpus_per_worker)] * settings.workers
@@ -303,8 +344,13 @@ def _start_ray(state: ClusterState, settings: ClusterSettings) -> None:
         node = Node(role=role, sid=spawn(command, log, env), node_id="", cpus=cpus)
         state.nodes.append(node)
         state.save()
-        _wait(lambda log=log: "Ray runtime started" in log.read_text(errors="replace"),
-              f"the Ray {role} node", name, state, node.sid)  # fmt: skip
+        _wait(
+            lambda log=log: "Ray runtime started" in log.read_text(errors="replace"),
+            f"the Ray {role} node",
+            name,
+            state,
+            node.sid,
+        )
         node.node_id = _node_id(node.sid)
         state.save()
     _wait(lambda: _alive_nodes(state) == len(plan), "every Ray node", "ray-head.log", state)
@@ -315,8 +361,10 @@ def _alive_nodes(state: ClusterState) -> int:
     code = "import ray; ray.init(address=%r); print(sum(n['Alive'] for n in ray.nodes()))"
     done = subprocess.run(
         [sys.executable, "-c", code % state.address],
-        capture_output=True, text=True, env={**os.environ, **state.env},
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        env={**os.environ, **state.env},
+    )
     lines = done.stdout.split()
     return int(lines[-1]) if done.returncode == 0 and lines else -1
 

@@ -30,9 +30,13 @@ class ClusterError(LinkevoError, RuntimeError):
 def spawn(command: list[str], log: Path, env: dict[str, str]) -> int:
     with open(log, "wb") as out:
         process = subprocess.Popen(
-            command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            env=env, start_new_session=True,
-        )  # fmt: skip
+            command,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            env=env,
+            start_new_session=True,
+        )
     return process.pid
 
 

@@ -14,6 +14,7 @@ import pandas as pd
 from linkevo.sim.linkage.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.linkage.physical import TOGGLE_DEG
 from linkevo.sim.robot.hexapod import in_floor_order
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status
 from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES, WALKING_FITNESS
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
@@ -123,7 +124,7 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
 
 
 def checks_line(checks: dict) -> str:
-    """Returns the physical checks of a linkage document (`sim.linkage.physical`) in one sentence."""
+    """Returns a linkage document's physical checks (`sim.linkage.physical`) in a sentence."""
     verdict = "buildable" if checks["buildable"] else "NOT buildable as simulated"
     turn = "turns fully" if checks["turns_fully"] else "does not turn fully"
     if checks["max_stretch"] is None:
@@ -155,14 +156,20 @@ def assembly_lines(doc: dict, rows: list[dict]) -> list[str]:
         part = "motor axle" if kinds[node] == "motor" else f"{high - low + 1}L pin"
         where = "frame" if low == -1 else f"layer {low}"
         beam_list = ", ".join(f"b{b}" for b in beams)
-        lines.append(f"- node {node} ({kinds[node]}): {part}, {where} to layer {high} "
-                     f"({beam_list})")  # fmt: skip
+        lines.append(
+            f"- node {node} ({kinds[node]}): {part}, {where} to layer {high} ({beam_list})"
+        )
         pins[part] += 1
     holes = collections.Counter(row["holes"] for row in rows)
-    lines += ["", "Parts: " + ", ".join(
-        [f"{n} x {h}-hole beam" for h, n in sorted(holes.items())]
-        + [f"{n} x {part}" for part, n in sorted(pins.items())]
-    ) + "."]  # fmt: skip
+    lines += [
+        "",
+        "Parts: "
+        + ", ".join(
+            [f"{n} x {h}-hole beam" for h, n in sorted(holes.items())]
+            + [f"{n} x {part}" for part, n in sorted(pins.items())]
+        )
+        + ".",
+    ]
     return lines
 
 
@@ -225,7 +232,7 @@ def simulated_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
             rows = _logged_walks(store, source, Path(tmp))
         else:
             return {}
-    rows = rows[rows["status"] == "walked"]
+    rows = rows[rows["status"] == Status.WALKED]
     order = in_floor_order(rows["floor"])
     rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")
     return {
@@ -251,13 +258,15 @@ def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataF
     match = [i for i, g in enumerate(log["genome"]) if np.array_equal(g, genome)]
     rows = []
     for i in match[-1:]:
-        for floor in ("flat", "carpet"):
+        for floor in FLOOR_ORDER:
             own = [c for c in log.columns if c.startswith(f"{floor}_")]
             rows.append(
                 {"floor": floor, **{c.removeprefix(f"{floor}_"): log[c].iloc[i] for c in own}}
             )
-    return pd.DataFrame(rows, columns=["floor", "status", "mean_distance_cm", "breaks",
-                                       "reason", "seconds", "bound_cm"])  # fmt: skip
+    return pd.DataFrame(
+        rows,
+        columns=["floor", "status", "mean_distance_cm", "breaks", "reason", "seconds", "bound_cm"],
+    )
 
 
 def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:

@@ -49,8 +49,9 @@ def _start_reaper() -> None:
     if _reaper is None:
         _reaper = subprocess.Popen(
             [sys.executable, "-m", "linkevo.orchestrator.reaper", _reaper_token],
-            stdin=subprocess.PIPE, start_new_session=True,
-        )  # fmt: skip
+            stdin=subprocess.PIPE,
+            start_new_session=True,
+        )
 
 
 def warm_kernels() -> None:

@@ -36,9 +36,10 @@ class Cluster:
 
         nodes = [n["Resources"].get("CPU", 0.0) for n in ray.nodes() if n.get("Alive")]
         return Cluster(
-            total_cpus=float(sum(nodes)), largest_node_cpus=float(max(nodes, default=0.0)),
+            total_cpus=float(sum(nodes)),
+            largest_node_cpus=float(max(nodes, default=0.0)),
             local=False,
-        )  # fmt: skip
+        )
 
 
 @dataclass(frozen=True)

@@ -10,9 +10,10 @@ from typing import TYPE_CHECKING
 
 from linkevo.hardware.field_trial import PHYSICS, log_field_trial
 from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
+from linkevo.sim.robot.field_summary import summary
 from linkevo.sim.robot.hexapod import LEG_SLOTS
 from linkevo.sim.robot.leg import LegError, leg_from_genome
-from linkevo.sim.robot.walk_figures import summary
+from linkevo.sim.robot.walk_rows import AS_EVOLVED, LEGO_BUILD
 from linkevo.sim.robot.walking import Walk, WalkSettings, field_trials
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.linkages import SourceLinkage
@@ -123,7 +124,7 @@ def simulate_source(
     )
     result = summary(walks, where, seconds)
     result["model"] = model
-    result["leg"] = "LEGO build" if leg.built else "as evolved"
+    result["leg"] = LEGO_BUILD if leg.built else AS_EVOLVED
     if leg.note:
         result["leg_note"] = leg.note
     return result, walks

@@ -86,9 +86,13 @@ def _claims() -> list[tuple[str, str, Callable[[pd.DataFrame], list[tuple[str, s
     def walked(t):
         out = []
         for approach, robot in (
-            ("MAP-WH", "first"), ("MAP-LIS", "modified"), ("MAP-ST", "first"),
-            ("MAP-ST", "modified"), ("MAP-AU", "first"), ("MAP-AU", "modified"),
-        ):  # fmt: skip
+            ("MAP-WH", "first"),
+            ("MAP-LIS", "modified"),
+            ("MAP-ST", "first"),
+            ("MAP-ST", "modified"),
+            ("MAP-AU", "first"),
+            ("MAP-AU", "modified"),
+        ):
             d = _per_draw(t, approach, robot)
             if not d.empty:
                 both = d["w"].all(axis=1)
@@ -133,26 +137,34 @@ def _claims() -> list[tuple[str, str, Callable[[pd.DataFrame], list[tuple[str, s
     return [
         (
             "The MAP-LIS first robot was incapable of walking: its legs were too large to "
-            "support the weight of the robot frame", "Section V-B", cannot_walk("MAP-LIS", "first"),
+            "support the weight of the robot frame",
+            "Section V-B",
+            cannot_walk("MAP-LIS", "first"),
         ),
         (
             "The MAP-WH modified robot (a larger path with much higher lift) was not capable "
-            "of producing a walking gait", "Section V-B", cannot_walk("MAP-WH", "modified"),
+            "of producing a walking gait",
+            "Section V-B",
+            cannot_walk("MAP-WH", "modified"),
         ),
         ("The other six robots walked on both floors", "Table I", walked),
         (
             "The MAP-ST modified robot (a slightly wider path) walked quicker on the flat floor",
-            "Section V-B", against_first("MAP-ST", ("flat",), quicker=True),
+            "Section V-B",
+            against_first("MAP-ST", ("flat",), quicker=True),
         ),
         (
             "The modified MAP-AU robot moved slightly slower than the original on both floors",
-            "Section V-B", against_first("MAP-AU", FLOORS, quicker=False),
+            "Section V-B",
+            against_first("MAP-AU", FLOORS, quicker=False),
         ),
         (
             "The MAP-LIS modified robot was the only one that walked faster on the carpet "
-            "than the flat floor", "Section V-B", carpet_only,
+            "than the flat floor",
+            "Section V-B",
+            carpet_only,
         ),
-    ]  # fmt: skip
+    ]
 
 
 def judge_prototyping(table: pd.DataFrame) -> pd.DataFrame:

@@ -275,18 +275,29 @@ def predict_table_one(
     linkage came from (`table_one_verdicts.judge_prototyping` judges the paper's claims
     on it)."""
     robots = choose_robots(
-        store, grid_id, config=config, seconds=seconds, repeats=repeats,
-        trials_drawn=trials_drawn, draw_seed=draw_seed, first=first, modified=modified,
+        store,
+        grid_id,
+        config=config,
+        seconds=seconds,
+        repeats=repeats,
+        trials_drawn=trials_drawn,
+        draw_seed=draw_seed,
+        first=first,
+        modified=modified,
         progress=progress,
-    )  # fmt: skip
+    )
     rows = []
     for robot in robots:
         for floor in FLOORS:
             for model in ROBOT_MODELS:
                 result, _ = simulate_source(
-                    robot.source, floor, config=config, seconds=seconds, repeats=repeats,
+                    robot.source,
+                    floor,
+                    config=config,
+                    seconds=seconds,
+                    repeats=repeats,
                     model=model,
-                )  # fmt: skip
+                )
                 run_id = (
                     log_simulated(store.uri, robot.source, robot.robot, result, 0) if log else ""
                 )

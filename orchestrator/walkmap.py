@@ -27,8 +27,9 @@ from linkevo.sim import decode, simulate
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.hexapod import Physics
-from linkevo.sim.robot.walk_map import COLUMNS, CellBatch, walk_map_frame
+from linkevo.sim.robot.walk_map import CellBatch
 from linkevo.sim.robot.walk_map import walk_rows as _walk_rows
+from linkevo.sim.robot.walk_rows import COLUMNS, Status, walk_map_frame
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 from linkevo.workers.store.runs import RunStore, TrialRun
@@ -91,7 +92,7 @@ def plan(
     floor) pairs `done` already holds with a status other than "failed"."""
     finished: set[tuple[int, str]] = set()
     if done is not None and not done.empty:
-        ok = done[done["status"] != "failed"]
+        ok = done[done["status"] != Status.FAILED]
         finished = set(zip(ok["cell"].astype(int), ok["floor"], strict=True))
     batches: dict[tuple[str, ...], list[int]] = {}
     for i, cell in enumerate(chosen["cell"].astype(int)):
@@ -271,12 +272,16 @@ def walk_map(
             done = None if restart else store.walk_map(trial.run_id, Path(tmp) / "done")
             chosen = selection.choose(table, trial.mode)
             batches = plan(
-                chosen, trial.mode, floors, done, as_evolved=selection.kind == "all",
+                chosen,
+                trial.mode,
+                floors,
+                done,
+                as_evolved=selection.kind == "all",
                 seconds=seconds,
-            )  # fmt: skip
+            )
             if done is not None and not batches:
                 return WalkMapResult(done, walked=False)
-            kept = [] if done is None else [done[done["status"] != "failed"]]
+            kept = [] if done is None else [done[done["status"] != Status.FAILED]]
             rows: list[dict] = []
             total = sum(len(b.cells) * len(b.floors) for b in batches)
             cells, built = sum(len(b.cells) for b in batches), 0
@@ -322,11 +327,11 @@ def _log(
     client = store.client
     client.log_artifact(trial.run_id, str(path))
     if picture and not frame.empty:
-        from linkevo.workers.plots.walk_map import draw_walk_map
+        from linkevo.workers.plots.walk_map_figure import draw_walk_map
 
         png = draw_walk_map(frame, trial.approach, trial.trial_key, tmp / layout.WALK_MAP_PNG)
         client.log_artifact(trial.run_id, str(png))
-    walked = frame[frame["status"] == "walked"]
+    walked = frame[frame["status"] == Status.WALKED]
     for floor, part in walked.groupby("floor"):
         distances = part.loc[~part["breaks"], "mean_distance_cm"].to_numpy(dtype=float)
         best = float(np.nanmax(distances)) if np.isfinite(distances).any() else math.nan

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.algorithms.walk_model import FLOORS, Prediction, WalkData, WalkModel
+from linkevo.algorithms.walk_model import Prediction, WalkData, WalkModel
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.robot.walk_features import (
     FEATURE_NAMES,
@@ -25,6 +25,7 @@ from linkevo.sim.robot.walk_features import (
     walk_features,
     walk_targets,
 )
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 from linkevo.workers.store.runs import NotFound, RunStore, TrialRun
@@ -66,7 +67,9 @@ def walked_repertoires(store: RunStore, refs: list[str]) -> list[WalkedRepertoir
                         )
                     continue
                 table = store.repertoire(trial.run_id, Path(tmp) / trial.run_id)
-                table = table[table["cell"].isin(walks.loc[walks["status"] == "walked", "cell"])]
+                table = table[
+                    table["cell"].isin(walks.loc[walks["status"] == Status.WALKED, "cell"])
+                ]
                 if table.empty:
                     continue
                 cells = table["cell"].to_numpy(dtype=np.int64)
@@ -127,7 +130,7 @@ def figures(prediction: Prediction, data: WalkData) -> dict[str, float]:
         return float(u / (broke.sum() * (~broke).sum()))
 
     out: dict[str, float] = {}
-    for k, floor in enumerate(FLOORS):
+    for k, floor in enumerate(FLOOR_ORDER):
         sound = np.isfinite(data.distance[:, k])
         walked = np.isfinite(data.breaks[:, k])
         rho = (
@@ -198,7 +201,7 @@ def log_model(store: RunStore, fitted: FittedModel, refs: list[str], seed: int) 
     experiment_id = ensure_experiment(store.uri, store.experiment)
     description = {
         "features": {"version": FEATURES_VERSION, "names": list(FEATURE_NAMES)},
-        "floors": list(FLOORS),
+        "floors": list(FLOOR_ORDER),
         "target": "cm walked in 10 s (credited, sim.robot.walk_fitness.credited_cm); breaks",
         "sources": refs,
         "trained_on": [t.run_id for t in fitted.trained_on],
@@ -230,7 +233,7 @@ def log_model(store: RunStore, fitted: FittedModel, refs: list[str], seed: int) 
         client.log_artifact(run_id, str(weights))
         client.log_dict(run_id, description, layout.WALK_MODEL_JSON)
         if fitted.prediction is not None and fitted.truth is not None:
-            from linkevo.workers.plots.walk_model import draw_predicted_vs_walked
+            from linkevo.workers.plots.walk_model_figure import draw_predicted_vs_walked
 
             png = draw_predicted_vs_walked(
                 fitted.prediction, fitted.truth, fitted.figures, Path(tmp) / layout.WALK_MODEL_PNG
@@ -282,8 +285,10 @@ def load_model(store: RunStore, run_id: str | None = None) -> tuple[WalkModel, s
         except (ValueError, RuntimeError, OSError) as exc:
             raise WalkModelError(f"walk model {run_id}'s weights are damaged: {exc}") from exc
     if model.n_features != len(FEATURE_NAMES):
-        raise WalkModelError(f"walk model {run_id} takes {model.n_features} features, not "
-                             f"{len(FEATURE_NAMES)}: fit a new one")  # fmt: skip
+        raise WalkModelError(
+            f"walk model {run_id} takes {model.n_features} features, not "
+            f"{len(FEATURE_NAMES)}: fit a new one"
+        )
     return model, run_id
 
 
@@ -295,7 +300,7 @@ def prediction_frame(model: WalkModel, table: pd.DataFrame, mode: str) -> pd.Dat
     cells = table["cell"].to_numpy(dtype=np.int64)
     parts = []
     bins = bin_columns(table.columns)
-    for k, floor in enumerate(FLOORS):
+    for k, floor in enumerate(FLOOR_ORDER):
         part = pd.DataFrame(
             {
                 "cell": cells,

@@ -8,10 +8,10 @@ imported from their modules when first used, so `import linkevo.sim.robot.hexapo
 numba or MuJoCo. Walking a robot from a linkage document, as a notebook would:
 
     import json
-    from linkevo.sim import FLOORS, from_document, leg_from_genome, walk
+    from linkevo.sim import FLAT, FLOORS, from_document, leg_from_genome, walk
 
     genome, mode = from_document(json.load(open("pulled/linkage.json")))
-    result = walk(leg_from_genome(genome, mode), FLOORS["flat"])
+    result = walk(leg_from_genome(genome, mode), FLOORS[FLAT])
     print(result.distance_m, result.breaks, result.reason)
 """
 
@@ -43,6 +43,8 @@ _HOMES = {
     "from_document": "linkage.linkage_doc",
     "to_document": "linkage.linkage_doc",
     # the 3-D robot
+    "FLAT": "robot.hexapod",
+    "CARPET": "robot.hexapod",
     "FLOORS": "robot.hexapod",
     "Leg": "robot.leg",
     "LegError": "robot.leg",

@@ -41,8 +41,11 @@ def actor_options(
             strategy = PlacementGroupSchedulingStrategy(
                 placement_group=placement_group, placement_group_bundle_index=first_bundle + i
             )
-        out.append(remote_cls.options(num_cpus=cpus, max_restarts=1, max_task_retries=1,
-                                      scheduling_strategy=strategy))  # fmt: skip
+        out.append(
+            remote_cls.options(
+                num_cpus=cpus, max_restarts=1, max_task_retries=1, scheduling_strategy=strategy
+            )
+        )
     return out
 
 

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.robot.walk_fitness import WALK_ORDER
+from linkevo.sim.robot.walk_rows import LEGO_BUILD, WALK_ORDER, Status
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.runs import NotFound, RunStore
 
@@ -66,7 +66,9 @@ def read_seed(folder: Path) -> Seed:
     legs on both floors, in ascending cell order."""
     repertoire = pd.read_parquet(folder / layout.REPERTOIRE)
     walks = pd.read_parquet(folder / layout.WALK_MAP)
-    walks = walks[(walks["leg"] == "LEGO build") & walks["status"].isin(["walked", "not walked"])]
+    walks = walks[
+        (walks["leg"] == LEGO_BUILD) & walks["status"].isin([Status.WALKED, Status.NOT_WALKED])
+    ]
     by_cell = {
         int(cell): part
         for cell, part in walks.groupby("cell")

@@ -14,6 +14,7 @@ from linkevo.sim import decode, simulate
 from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.hexapod import FLAT, Physics
+from linkevo.sim.robot.walk_rows import COLUMNS, Status
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.run_layout import (
     BEST_WALKER,
@@ -38,7 +39,7 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
         view: the optimizer's final `view()`: genome (N, 56), loss (N,), cell (N,) where
             it has cells.
     """
-    from linkevo.sim.robot.walk_map import COLUMNS, CellBatch, walk_cells  # MuJoCo: only when asked
+    from linkevo.sim.robot.walk_map import CellBatch, walk_cells  # MuJoCo: only when asked
 
     genomes = np.asarray(view["genome"], dtype=np.float64)
     loss = np.asarray(view["loss"], dtype=np.float64)
@@ -50,7 +51,7 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
     walked = CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,))
     rows = walk_cells(walked, Physics.of(spec.physics))
     distance = np.array([r["mean_distance_cm"] for r in rows], dtype=float)
-    sound = np.array([r["status"] == "walked" and not r["breaks"] for r in rows], dtype=bool)
+    sound = np.array([r["status"] == Status.WALKED and not r["breaks"] for r in rows], dtype=bool)
     columns = {c: np.array([r[c] for r in rows]) for c in COLUMNS}
     write_parquet_atomic(
         out_dir / WALK_RERANK, {**columns, "loss": loss[keep], "genome": genomes[keep]}
@@ -67,7 +68,7 @@ def write_walk_tables(log: WalkLog, view: dict[str, np.ndarray], spec: TrialSpec
     """Writes a walking trial's walk log (`walks.parquet`: every candidate it built) and,
     for a repertoire, the walk map of its cells (`walkmap.parquet` and `walkmap.png`, as
     `linkevo walkmap` writes them: explorer, pull and report read them alike)."""
-    from linkevo.workers.plots.walk_map import draw_walk_map
+    from linkevo.workers.plots.walk_map_figure import draw_walk_map
 
     write_parquet_atomic(out_dir / WALK_LOG, log.table())
     bins = bin_columns(list(view))

@@ -32,6 +32,7 @@ from linkevo.sim.robot.walk_fitness import (
     rejected_loss,
     walk_candidate,
 )
+from linkevo.sim.robot.walk_rows import Stage
 from linkevo.workers.evaluators import Bar, Pending
 from linkevo.workers.seed_repertoire import Seed
 from linkevo.workers.walk_log import WalkLog
@@ -161,21 +162,22 @@ class WalkingEvaluator:
             self._in_flight = None
             losses = np.repeat(rejected_loss(base.error, checks)[:, None], 2, axis=1)
             losses[skipped] = np.inf  # not walked: it enters no archive
-            done = [(CandidateWalk("seeded", "", (), 0.0), "") for _ in np.flatnonzero(reused)]
+            done = [(CandidateWalk(Stage.SEEDED, "", (), 0.0), "") for _ in np.flatnonzero(reused)]
             done += list(walks)
             rows = [seeded[i] for i in np.flatnonzero(reused)]
             built_now = np.concatenate([np.flatnonzero(reused), built]).astype(np.int64)
             for i, (walk, _) in zip(built_now, done, strict=True):
-                if walk.stage == "seeded":
-                    losses[i] = floor_losses("seeded", seeded[i])
+                if walk.stage == Stage.SEEDED:
+                    losses[i] = floor_losses(Stage.SEEDED, seeded[i])
                     continue
-                by_floor = known[walk.key] if walk.stage == "cached" else _by_floor(walk)
+                by_floor = known[walk.key] if walk.stage == Stage.CACHED else _by_floor(walk)
                 losses[i] = floor_losses(walk.stage, by_floor)
                 rows.append(by_floor)
             self.log.counts["walks_skipped"] += len(skipped)
             self._tally(len(genomes) - len(built_now) - len(skipped), [w for w, _ in done])
-            self.log.append(iteration, genomes[built_now], [w for w, _ in done],
-                            [n for _, n in done], rows)  # fmt: skip
+            self.log.append(
+                iteration, genomes[built_now], [w for w, _ in done], [n for _, n in done], rows
+            )
             loss = losses if self.two_objective else losses.max(axis=1)
             return dataclasses.replace(base, loss=np.ascontiguousarray(loss))
 
@@ -187,13 +189,13 @@ class WalkingEvaluator:
         counts["rejected_2d"] += rejected
         for walk in walks:
             stage = walk.stage
-            if stage == "walked":
+            if stage == Stage.WALKED:
                 counts["walks"] += 1
-            elif stage == "cached":
+            elif stage == Stage.CACHED:
                 counts["walk_cache_hits"] += 1
-            elif stage == "seeded":
+            elif stage == Stage.SEEDED:
                 counts["walks_reused"] += 1
-            elif stage == "failed":
+            elif stage == Stage.FAILED:
                 counts["walk_failures"] += 1
             else:
                 counts["rejected_build"] += 1

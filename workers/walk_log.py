@@ -13,19 +13,30 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.robot.hexapod import WALK_SECONDS
-from linkevo.sim.robot.walk_fitness import OBJECTIVE_FLOORS, WALK_ORDER, CandidateWalk
-from linkevo.sim.robot.walk_map import COLUMNS, walk_map_frame
+from linkevo.sim.robot.walk_fitness import CandidateWalk
+from linkevo.sim.robot.walk_rows import (
+    COLUMNS,
+    FLOOR_FIELDS,
+    FLOOR_ORDER,
+    LEGO_BUILD,
+    WALK_ORDER,
+    Stage,
+    Status,
+    walk_map_frame,
+)
 
 if TYPE_CHECKING:
     import pandas as pd
 
-FLOOR_FIELDS = ("status", "mean_distance_cm", "breaks", "reason", "bound_cm",
-                "torque_p95_of_stall", "pin_force_p99_n", "seconds")  # fmt: skip
-"""A walk-map row's figures, kept per floor in the walk log."""
 LOG_COUNTERS = (
-    "walks", "walk_cache_hits", "walks_reused", "rejected_2d", "rejected_build", "walk_failures",
+    "walks",
+    "walk_cache_hits",
+    "walks_reused",
+    "rejected_2d",
+    "rejected_build",
+    "walk_failures",
     "walks_skipped",
-)  # fmt: skip
+)
 """The walk log's running counts, as the trial's metrics name them."""
 
 
@@ -36,7 +47,7 @@ class WalkLog:
     Attributes:
         genome: (N, 56) each candidate.
         iteration: (N,) the iteration it was asked in (1 for the first batch).
-        stage: (N,) its `sim.robot.walk_fitness.STAGES` stage (never "rejected").
+        stage: (N,) its `sim.robot.walk_rows.Stage` (never rejected).
         key: (N,) its leg's key ("" when no leg was built).
         node: (N,) where it was built and walked (a Ray node id, or this host's name).
         compute_s: (N,) what its build and walks took there.
@@ -71,8 +82,14 @@ class WalkLog:
     def __len__(self) -> int:
         return len(self.stage)
 
-    def append(self, iteration: int, genomes: np.ndarray, walks: list[CandidateWalk],
-               nodes: list[str], rows: list[dict[str, dict]]) -> None:  # fmt: skip
+    def append(
+        self,
+        iteration: int,
+        genomes: np.ndarray,
+        walks: list[CandidateWalk],
+        nodes: list[str],
+        rows: list[dict[str, dict]],
+    ) -> None:
         """Adds the built candidates of one batch: their genomes (K, 56), walks, nodes
         and rows by floor (a cached candidate's are the walk it reused)."""
         self.genome = np.concatenate([self.genome, genomes.reshape(-1, 56)])
@@ -92,8 +109,8 @@ class WalkLog:
         (a leg whose second floor was left out by its candidate's bar is not), by key."""
         skipped = np.zeros(len(self), dtype=bool)
         for columns in self.floors.values():
-            skipped |= (columns["status"] == "not walked") & ~columns["breaks"]
-        walked = np.flatnonzero((self.stage == "walked") & ~skipped)
+            skipped |= (columns["status"] == Status.NOT_WALKED) & ~columns["breaks"]
+        walked = np.flatnonzero((self.stage == Stage.WALKED) & ~skipped)
         return {str(self.key[i]): self.rows(i) for i in walked}
 
     def rows(self, i: int) -> dict[str, dict]:
@@ -101,16 +118,16 @@ class WalkLog:
         out = {}
         for floor, columns in self.floors.items():
             values = {k: v[i].item() for k, v in columns.items()}
-            out[floor] = {"cell": -1, "floor": floor, "leg": "LEGO build", **values}
+            out[floor] = {"cell": -1, "floor": floor, "leg": LEGO_BUILD, **values}
         return out
 
     def metrics(self) -> dict[str, float]:
         """Returns the running counts and the best sound walk on each floor (cm credited,
         `sim.robot.walk_fitness.credited_cm`; NaN before any)."""
         out = {k: float(v) for k, v in self.counts.items()}
-        for floor in OBJECTIVE_FLOORS:
+        for floor in FLOOR_ORDER:
             columns = self.floors[floor]
-            sound = (columns["status"] == "walked") & ~columns["breaks"]
+            sound = (columns["status"] == Status.WALKED) & ~columns["breaks"]
             bound = columns["bound_cm"][sound]
             distance = columns["mean_distance_cm"][sound]
             credited = np.where(np.isfinite(bound), np.minimum(distance, bound), distance)
@@ -136,8 +153,9 @@ class WalkLog:
     @classmethod
     def from_state(cls, state: Mapping[str, np.ndarray]) -> WalkLog:
         """Returns the log `state_dict` saved (KeyError, ValueError when it is not one)."""
-        floors = {f: {k: np.asarray(state[f"walks.{f}.{k}"]) for k in FLOOR_FIELDS}
-                  for f in WALK_ORDER}  # fmt: skip
+        floors = {
+            f: {k: np.asarray(state[f"walks.{f}.{k}"]) for k in FLOOR_FIELDS} for f in WALK_ORDER
+        }
         counts = np.asarray(state["walks.counts"], np.int64)
         counts = np.pad(counts, (0, len(LOG_COUNTERS) - len(counts)))  # a log before a count
         log = cls(

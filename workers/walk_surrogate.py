@@ -23,8 +23,11 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from linkevo.algorithms.scoring import QD_OFFSETS
 from linkevo.algorithms.walk_model import WalkData, WalkModel
 from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features, walk_targets
+from linkevo.sim.robot.walk_rows import Stage
+from linkevo.sim.study import WALKING_FITNESS
 
 START = 200
 """Walks logged before the model first screens."""
@@ -38,9 +41,6 @@ floor is not walked (a robot that breaks adds nothing to the walking QD-score). 
 `KAPPA`, chosen on the first four MAP-LIS F_w trials' walk logs, each screened by a model
 of the other three's first 400 walks: 0.56-0.81 of the candidates walked, keeping 0.88-0.97
 of the forward distance their walkers add (docs/walking.md)."""
-QD_OFFSET = 0.0
-"""The walking fitness's QD offset (`algorithms.scoring.QD_OFFSETS`): a loss at or above it
-adds nothing to the walking QD-score."""
 
 
 class WalkSurrogate:
@@ -78,7 +78,7 @@ class WalkSurrogate:
         optimistic = prediction.distance + KAPPA * prediction.spread  # (N, 2) cm per 10 s
         loss = -optimistic.min(axis=1)  # the walking fitness: the worse floor
         certain_break = (prediction.p_break >= P_BREAK_SKIP).any(axis=1)
-        return (loss < np.minimum(bars, QD_OFFSET)) & ~certain_break
+        return (loss < np.minimum(bars, QD_OFFSETS[WALKING_FITNESS])) & ~certain_break
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """Returns what a resumed trial needs to refit the same model."""
@@ -97,7 +97,7 @@ def training_data(log, rows: int, mode: str) -> WalkData:
     the walk model learns them (`sim.robot.walk_features.walk_targets`)."""
     import pandas as pd
 
-    walked = np.flatnonzero(log.stage[:rows] == "walked")
+    walked = np.flatnonzero(log.stage[:rows] == Stage.WALKED)
     frame = pd.DataFrame(
         [{**row, "cell": j} for j, i in enumerate(walked) for row in log.rows(i).values()],
         columns=["cell", "floor", "status", "breaks", "mean_distance_cm", "bound_cm", "seconds"],

@@ -121,8 +121,11 @@ def simulate_handler(args: argparse.Namespace) -> int:
     )
     pictures = []
     if args.out is not None and walks:
-        what = (f"{source.approach} {args.robot} robot" if source.approach != "unknown"
-                else Path(args.linkage).name)  # fmt: skip
+        what = (
+            f"{source.approach} {args.robot} robot"
+            if source.approach != "unknown"
+            else Path(args.linkage).name
+        )
         title = f"{what}, {args.floor} floor, repeat 1"
         pictures = write_pictures(walks[0], args.out, title)
     if not args.no_log:

@@ -171,8 +171,11 @@ def handle(args: argparse.Namespace) -> int:
             text = trials[0].info.run_id
             key = trials[0].data.tags.get(layout.TRIAL_KEY)
             loss = trials[0].data.metrics["best_loss"]
-            print(f"best design of grid {args.ref}, buildable or not: {key}'s best linkage "
-                  f"(run {text}), loss {loss:.6g}", file=sys.stderr)  # fmt: skip
+            print(
+                f"best design of grid {args.ref}, buildable or not: {key}'s best linkage "
+                f"(run {text}), loss {loss:.6g}",
+                file=sys.stderr,
+            )
         else:
             text, what, passed_over = best_design(store, trials)
             print(f"best buildable design of grid {args.ref}: {what}", file=sys.stderr)
@@ -183,8 +186,10 @@ def handle(args: argparse.Namespace) -> int:
         return _print_cells(store, ref, args.list, args.buildable)
     source = load_source(store, ref)
     cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
-    print(f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
-          file=sys.stderr)  # fmt: skip
+    print(
+        f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
+        file=sys.stderr,
+    )
     walks = simulated_walks(store, source)
     if walks:
         print(f"simulated walk: {walk_line(walks)}", file=sys.stderr)

@@ -94,9 +94,12 @@ def run_ui(args: argparse.Namespace) -> int:
     address = ui_address(f"http://127.0.0.1:{args.port}", experiment_id)
     with open(log, "a") as out:
         server = subprocess.Popen(
-            command, stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+            command,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
             preexec_fn=stop_with_parent,
-        )  # fmt: skip
+        )
     print(f"MLflow UI on {address}  (Ctrl-C stops it; server log: {log})", file=sys.stderr)
 
     def stop(signum: int, frame: object) -> None:

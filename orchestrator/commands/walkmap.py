@@ -10,6 +10,7 @@ import sys
 from linkevo.orchestrator.commands import options
 from linkevo.orchestrator.commands.hexapod import load_robot
 from linkevo.sim.robot.hexapod import FLOORS
+from linkevo.sim.robot.walk_rows import Status
 from linkevo.workers.store import run_layout as layout
 
 BOTH = "both"
@@ -161,7 +162,7 @@ def summary(trial, frame) -> str:
     cells not walked, the furthest walker."""
     lines = [f"{trial.trial_key} (run {trial.run_id}): {layout.WALK_MAP}, {layout.WALK_MAP_PNG}"]
     for floor, part in frame.groupby("floor"):
-        walked = part[part["status"] == "walked"]
+        walked = part[part["status"] == Status.WALKED]
         sound = walked[~walked["breaks"].astype(bool)]
         best = sound.sort_values("mean_distance_cm", ascending=False).head(1)
         furthest = (
@@ -169,7 +170,7 @@ def summary(trial, frame) -> str:
             if len(best)
             else "none walks"
         )
-        others = part[part["status"] != "walked"]["status"].value_counts()
+        others = part[part["status"] != Status.WALKED]["status"].value_counts()
         skipped = "".join(f", {n} {status}" for status, n in others.items())
         beyond = int((sound["mean_distance_cm"] > sound["bound_cm"]).sum())
         frail = int(walked["reason"].fillna("").str.contains("frail:").sum())

@@ -123,8 +123,10 @@ def predict_handler(args: argparse.Namespace) -> int:
     for trial in trials:
         frame = predict(store, trial, model, model_run)
         cells = frame["cell"].nunique()
-        lines = [f"{trial.trial_key} (run {trial.run_id}): walkpred.parquet, {cells} cells "
-                 f"predicted by walk model {model_run}"]  # fmt: skip
+        lines = [
+            f"{trial.trial_key} (run {trial.run_id}): walkpred.parquet, {cells} cells "
+            f"predicted by walk model {model_run}"
+        ]
         for floor, part in frame.groupby("floor", sort=False):
             sound = part[part["p_break"] < 0.5]
             furthest = "none"

@@ -15,9 +15,20 @@ from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 
 COLUMNS: tuple[str, ...] = (
-    "fitness", "approach", "n_a", "median_a", "n_b", "median_b", "difference",
-    "u", "method", "p", "p_holm", "significant", "a12",
-)  # fmt: skip
+    "fitness",
+    "approach",
+    "n_a",
+    "median_a",
+    "n_b",
+    "median_b",
+    "difference",
+    "u",
+    "method",
+    "p",
+    "p_holm",
+    "significant",
+    "a12",
+)
 """The columns of `compare_grids`."""
 
 
@@ -61,13 +72,20 @@ def differences(
             out.append(f"{cell}: {row.n_a} trials in a, {row.n_b} in b")
         if "final_evaluations" in a and "final_evaluations" in b:
             budgets = [
-                float(np.median(d.final_evaluations[(d.fitness == row.fitness)
-                                                    & (d.approach == row.approach)]))
+                float(
+                    np.median(
+                        d.final_evaluations[
+                            (d.fitness == row.fitness) & (d.approach == row.approach)
+                        ]
+                    )
+                )
                 for d in (a, b)
-            ]  # fmt: skip
+            ]
             if budgets[0] != budgets[1] and not np.isnan(budgets).any():
-                out.append(f"{cell}: a budget of {budgets[0]:,.0f} evaluations in a, "
-                           f"{budgets[1]:,.0f} in b")  # fmt: skip
+                out.append(
+                    f"{cell}: a budget of {budgets[0]:,.0f} evaluations in a, "
+                    f"{budgets[1]:,.0f} in b"
+                )
     return out
 
 

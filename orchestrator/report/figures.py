@@ -240,9 +240,13 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
                 ax.set_ylabel(f"{space.names[0]} (bin)")
                 ax.set_xlabel(f"{space.names[1]} (bin)")
         fig.colorbar(
-            shown, ax=axes[:, col].tolist(), shrink=0.6, label=f"best {LOSS_LABEL}",
-            extend="max", location="bottom",
-        )  # fmt: skip
+            shown,
+            ax=axes[:, col].tolist(),
+            shrink=0.6,
+            label=f"best {LOSS_LABEL}",
+            extend="max",
+            location="bottom",
+        )
     fig.suptitle(study_title(grid))
     return ReportFigure(
         name="repertoire_maps",

@@ -300,11 +300,17 @@ def _fitness_versus(
         if x.size and y.size:
             low, high = a12_interval(x, y)
             rows.append(
-                {"approach_a": f"{label(approach)} {label(first)}",
-                 "approach_b": label(second), "median_a": float(np.median(x)),
-                 "median_b": float(np.median(y)), "a12": a12(x, y), "a12_low": low,
-                 "a12_high": high, "p": mann_whitney(x, y)[1]}
-            )  # fmt: skip
+                {
+                    "approach_a": f"{label(approach)} {label(first)}",
+                    "approach_b": label(second),
+                    "median_a": float(np.median(x)),
+                    "median_b": float(np.median(y)),
+                    "a12": a12(x, y),
+                    "a12_low": low,
+                    "a12_high": high,
+                    "p": mann_whitney(x, y)[1],
+                }
+            )
     if not rows:
         return Finding(number, "", claim, rule, NOT_TESTABLE, "no approach has both fitnesses")
     table = pd.DataFrame(rows)

@@ -162,10 +162,25 @@ def mann_whitney(x: np.ndarray, y: np.ndarray) -> tuple[float, float, str]:
 
 
 TEST_COLUMNS: tuple[str, ...] = (
-    "fitness", "family", "approach_a", "approach_b", "n_a", "n_b", "median_a", "median_b",
-    "u", "method", "p", "p_holm", "significant", "a12", "a12_low", "a12_high", "magnitude",
+    "fitness",
+    "family",
+    "approach_a",
+    "approach_b",
+    "n_a",
+    "n_b",
+    "median_a",
+    "median_b",
+    "u",
+    "method",
+    "p",
+    "p_holm",
+    "significant",
+    "a12",
+    "a12_low",
+    "a12_high",
+    "magnitude",
     "better",
-)  # fmt: skip
+)
 """The columns of `pairwise_tests`."""
 
 

@@ -64,11 +64,24 @@ def evaluate(
     if n:
         d = out.descriptors
         kernels.evaluate_batch(
-            genomes, legacy, n_angles, FITNESS_CODES[fitness], target.points, target.is_step,
+            genomes,
+            legacy,
+            n_angles,
+            FITNESS_CODES[fitness],
+            target.points,
+            target.is_step,
             min(n, 16 * numba.get_num_threads()),
-            out.loss.reshape(n, n_obj), out.error, out.angle_error, out.valid, out.foot,
-            out.foot_x, out.foot_y, d["MAP-WH"], d["MAP-LIS"], d["MAP-ST"],
-        )  # fmt: skip
+            out.loss.reshape(n, n_obj),
+            out.error,
+            out.angle_error,
+            out.valid,
+            out.foot,
+            out.foot_x,
+            out.foot_y,
+            d["MAP-WH"],
+            d["MAP-LIS"],
+            d["MAP-ST"],
+        )
     return out
 
 

@@ -48,9 +48,19 @@ def _round(batch: LinkageBatch, here: Motion, keep: int) -> np.ndarray:
     theta = crank_angles(DEFAULT_ANGLES, batch.mode == "legacy")
     lengths = np.empty((len(batch), batch.beam_length.shape[1]))
     round_batch(
-        batch.node_int, batch.node_float, batch.beam_int, batch.n_beams, batch.beam_length,
-        here.foot, batch.mode == "legacy", np.ascontiguousarray(theta[every]), theta,
-        np.ascontiguousarray(foot[..., 0]), np.ascontiguousarray(foot[..., 1]),
-        np.ascontiguousarray(here.valid[:, every]), keep, lengths,
-    )  # fmt: skip
+        batch.node_int,
+        batch.node_float,
+        batch.beam_int,
+        batch.n_beams,
+        batch.beam_length,
+        here.foot,
+        batch.mode == "legacy",
+        np.ascontiguousarray(theta[every]),
+        theta,
+        np.ascontiguousarray(foot[..., 0]),
+        np.ascontiguousarray(foot[..., 1]),
+        np.ascontiguousarray(here.valid[:, every]),
+        keep,
+        lengths,
+    )
     return lengths

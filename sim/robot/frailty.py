@@ -21,7 +21,7 @@ Technic beam's section (`ABS_E_N_MM2`, `I_OUT_MM4`, `I_IN_MM4`) gives the deflec
 W is the robot's weight over one tripod's three feet (`foot_load_n`). The figures are
 static estimates, the walk itself stays rigid: they say how far the real leg would give
 under the loads the rigid walk found, and `FRAIL_FOOT_MM` / `FRAIL_PIN_MOMENT_NMM` decide
-when that is too far (`sim.robot.walking.break_reason`'s "frail").
+when that is too far (a "frail" break reason of the walk, `judge_frailty`).
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ beams share the load), so the limit is set where even a leg several times stiffe
 more than a module."""
 FRAIL_PIN_MOMENT_NMM = 1920.0
 """The out-of-plane moment on a pin above which the leg is frail: the in-plane pin-load
-limit (60 N, `sim.robot.walk_figures.PIN_FORCE_LIMIT_N`) levered across four layers (32 mm), the
+limit (60 N, `sim.robot.breaks.PIN_FORCE_LIMIT_N`) levered across four layers (32 mm), the
 widest bridge a two-pin Technic connector spans."""
 G = 9.81
 

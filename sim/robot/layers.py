@@ -107,8 +107,10 @@ def _colouring(
 
     for a, b in same:
         group[root(a)] = root(b)
-    roots = sorted({root(i) for i in range(n_items)}, key=lambda r: min(
-        i for i in range(n_items) if root(i) == r))  # fmt: skip
+    roots = sorted(
+        {root(i) for i in range(n_items)},
+        key=lambda r: min(i for i in range(n_items) if root(i) == r),
+    )
     index = {r: g for g, r in enumerate(roots)}
     neighbours: list[set[int]] = [set() for _ in roots]
     for a, b in conflicts:

@@ -254,9 +254,10 @@ def build_lean_robot(
     reach = {s: floor_reach(legs[s]) for s in LEG_SLOTS}
     coupled = {s: [int(p) for p in np.unique(legs[s].part[reach[s]])] for s in LEG_SLOTS}
     carried = sum(
-        _beam_kg(legs[s], b) for s in LEG_SLOTS
+        _beam_kg(legs[s], b)
+        for s in LEG_SLOTS
         for b in np.flatnonzero(~np.isin(legs[s].part, coupled[s]))
-    )  # fmt: skip
+    )
     spec, body = robot_spec(floor, frame, timestep, extra_kg=carried)
     rows: list[_Row] = []
     foot_layers: dict[str, int] = {}
@@ -271,9 +272,13 @@ def build_lean_robot(
             name=f"{slot}/crank", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, leg.facing(), 0]
         )
         crank.add_geom(
-            type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[0.005, 0, 0], mass=0.002,
-            contype=0, conaffinity=0, rgba=[0.85, 0.6, 0.1, 1],
-        )  # fmt: skip
+            type=mujoco.mjtGeom.mjGEOM_SPHERE,
+            size=[0.005, 0, 0],
+            mass=0.002,
+            contype=0,
+            conaffinity=0,
+            rgba=[0.85, 0.6, 0.1, 1],
+        )
         sites = {}  # part -> (body, its origin in the frame's coordinates)
         for part in coupled[slot]:
             members = np.flatnonzero(leg.part == part)
@@ -388,6 +393,7 @@ def _couple(spec, target, slot: str, i: int, leg: Leg, part: int, pivot: int, po
             solref=[2 * spec.option.timestep, 1.0],
             solimp=EQUALITY_SOLIMP,
         )
-        rows.append(_Row(f"{name}/{coord}", i, _fit_tables(values, turn), turn,
-                         float(values[pose]), scale))  # fmt: skip
+        rows.append(
+            _Row(f"{name}/{coord}", i, _fit_tables(values, turn), turn, float(values[pose]), scale)
+        )
     return rows

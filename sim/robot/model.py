@@ -11,8 +11,6 @@ never asks which it runs: it steps `control_tick` and samples `RobotModel.loads`
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -319,17 +317,3 @@ def _add_scenery(spec: mujoco.MjSpec) -> None:
         height=200,
     )
     spec.add_material(name="floor", textures=["", "floor"], texrepeat=[5, 5], texuniform=True)
-
-
-@contextlib.contextmanager
-def quiet_engine() -> Iterator[None]:
-    """Keeps MuJoCo's warnings out of `MUJOCO_LOG.TXT` in the user's working directory.
-
-    A walk reads the engine's warnings off `MjData.warning` (`sim.robot.walking`) instead.
-    """
-    previous = mujoco.get_mju_user_warning()
-    mujoco.set_mju_user_warning(lambda _message: None)
-    try:
-        yield
-    finally:
-        mujoco.set_mju_user_warning(previous)

@@ -38,7 +38,7 @@ from linkevo.sim.linkage.decoding import decode
 from linkevo.sim.linkage.kinematics import simulate
 from linkevo.sim.linkage.physical import physical_checks, quiet_all_nan
 from linkevo.sim.robot.builds import lego_builds
-from linkevo.sim.robot.walk_fitness import credited_cm
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status, credited_cm
 from linkevo.sim.study import DEFAULT_ANGLES
 
 if TYPE_CHECKING:
@@ -51,21 +51,41 @@ STANCE_BANDS: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0)
 the share of the turn it is down (duty), its x extent while down (stroke) and the share of
 that time it moves backwards."""
 SCALARS: tuple[str, ...] = (
-    "path_width", "path_height", "path_low", "path_high", "stance_stroke", "path_mean_x",
-    "path_mean_y", "reach_below_foot", "assembled_share", "crank_length", "n_beams",
-    "beams_total", "beam_longest", "min_transmission_deg", "toggle_passages", "max_stretch",
-    "width", "height", "rounding_total", "rounding_largest", "build_shift", "built",
+    "path_width",
+    "path_height",
+    "path_low",
+    "path_high",
+    "stance_stroke",
+    "path_mean_x",
+    "path_mean_y",
+    "reach_below_foot",
+    "assembled_share",
+    "crank_length",
+    "n_beams",
+    "beams_total",
+    "beam_longest",
+    "min_transmission_deg",
+    "toggle_passages",
+    "max_stretch",
+    "width",
+    "height",
+    "rounding_total",
+    "rounding_largest",
+    "build_shift",
+    "built",
     *(f"{what}_{h:g}" for h in STANCE_BANDS for what in ("duty", "stroke", "backwards")),
-    "tripod_advance", "tripod_bob", "tripod_both_down", "tripod_backwards", "tripod_drop",
-)  # fmt: skip
+    "tripod_advance",
+    "tripod_bob",
+    "tripod_both_down",
+    "tripod_backwards",
+    "tripod_drop",
+)
 FEATURE_NAMES: tuple[str, ...] = (
     *(f"foot_x_{k}" for k in range(DEFAULT_ANGLES)),
     *(f"foot_y_{k}" for k in range(DEFAULT_ANGLES)),
     *SCALARS,
 )
 """The columns of `walk_features`, in order."""
-TARGET_FLOORS: tuple[str, str] = ("flat", "carpet")
-"""The floors of `walk_targets`' columns, in order."""
 
 
 @quiet_all_nan
@@ -168,19 +188,19 @@ def _tripod(x: np.ndarray, y: np.ndarray) -> list[np.ndarray]:
 
 
 def walk_targets(walks: pd.DataFrame, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Returns what walk-map rows (`sim.robot.walk_map.COLUMNS`) say of `cells` (N,) on each of
-    `TARGET_FLOORS`, what the walk model learns: distance (N, 2) cm per 10 s, credited at
-    most the level-body bound (`sim.robot.walk_fitness.credited_cm`), NaN where not walked there
+    """Returns what walk rows (`sim.robot.walk_rows.WalkRow`) say of `cells` (N,) on each of
+    `FLOOR_ORDER`, what the walk model learns: distance (N, 2) cm per 10 s, credited at
+    most the level-body bound (`sim.robot.walk_rows.credited_cm`), NaN where not walked there
     or broken; breaks (N, 2) 1.0 or 0.0, NaN where not walked there (not buildable,
     skipped, failed: such a row teaches nothing)."""
     at = {int(c): i for i, c in enumerate(cells)}
-    distance = np.full((len(cells), len(TARGET_FLOORS)), np.nan)
-    breaks = np.full((len(cells), len(TARGET_FLOORS)), np.nan)
-    walked = walks[(walks["status"] == "walked") & walks["cell"].isin(at)]
+    distance = np.full((len(cells), len(FLOOR_ORDER)), np.nan)
+    breaks = np.full((len(cells), len(FLOOR_ORDER)), np.nan)
+    walked = walks[(walks["status"] == Status.WALKED) & walks["cell"].isin(at)]
     for row in walked.to_dict("records"):
-        if row["floor"] not in TARGET_FLOORS:
+        if row["floor"] not in FLOOR_ORDER:
             continue
-        i, k = at[int(row["cell"])], TARGET_FLOORS.index(row["floor"])
+        i, k = at[int(row["cell"])], FLOOR_ORDER.index(row["floor"])
         breaks[i, k] = float(bool(row["breaks"]))
         if not row["breaks"]:
             distance[i, k] = credited_cm(row)

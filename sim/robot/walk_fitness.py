@@ -6,7 +6,7 @@ with the walk map's walk (`sim.robot.walk_map.walk_map_settings`) for `SEARCH_SE
 at its break (`WalkSettings.stop_at_break`), on carpet and then on flat. Its loss on a floor
 is minus the distance walked there, in cm per the study's 10 s (`credited_cm`); F_w is the
 worse floor's, since a builder wants a leg that walks on both, and its two-objective
-variant F_w2 (NSGA-II) keeps the floors apart (`OBJECTIVE_FLOORS`). A leg that breaks on
+variant F_w2 (NSGA-II) keeps the floors apart (`FLOOR_ORDER`). A leg that breaks on
 carpet is not walked on flat: it is broken whatever flat does, so its flat loss is its
 carpet loss.
 
@@ -43,15 +43,24 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, PhysicalChecks
-from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS, Physics
+from linkevo.sim.robot.hexapod import FLOORS, Physics
 from linkevo.sim.robot.leg import LegError, recipe_and_leg
-from linkevo.sim.robot.walk_map import error_text, map_row, walk_map_settings, walked_row
+from linkevo.sim.robot.walk_map import walk_map_settings
+from linkevo.sim.robot.walk_rows import (
+    FLOOR_ORDER,
+    LEGO_BUILD,
+    TOLD_STAGES,
+    WALK_ORDER,
+    Stage,
+    Status,
+    WalkRow,
+    credited_cm,
+    error_text,
+    map_row,
+    walked_row,
+)
 from linkevo.sim.robot.walking import WalkSettings, walk
 
-OBJECTIVE_FLOORS: tuple[str, str] = ("flat", "carpet")
-"""The floors of F_w2's two objectives, in order (loss_0 flat, loss_1 carpet)."""
-WALK_ORDER: tuple[str, str] = ("carpet", "flat")
-"""The order a candidate's floors are walked in: carpet first, where legs break most."""
 BROKEN_LOSS = 1000.0
 """A floor's loss when the robot breaks there, less the distance walked until it stopped."""
 NO_LEG_LOSS = 2000.0
@@ -61,15 +70,6 @@ REJECTED_LOSS = 3000.0
 SOUND_BELOW = BROKEN_LOSS / 2
 """An F_w loss below this is a sound walk's (no robot walks 5 m in 10 s, backwards or
 before it breaks); at or above it the robot broke or was never walked."""
-STAGES: tuple[str, ...] = (
-    "walked", "cached", "seeded", "rejected", "no_lego_build", "no_turn", "failed",
-)  # fmt: skip
-"""Where a candidate's evaluation ended: walked on the physics; its leg walked before in the
-trial (its rows reused); a warm start's cell, told with its walk map's rows; rejected by
-the 2-D checks; no whole-module rounding turns; the LEGO build does not turn a full turn;
-the build or a walk raised."""
-WALKER_CM = 50.0
-"""A walker: a leg that walks at least this far (cm, 10 s) on both floors without breaking."""
 SEARCH_SECONDS = 5.0
 """A search walk's length (after the half-second settle). Against the Table I protocol on
 24 buildable cells of a study repertoire (`benchmarks/walkmap_fidelity.py`), its distance
@@ -89,15 +89,15 @@ class CandidateWalk:
     """What walking one candidate gave.
 
     Attributes:
-        stage: one of `STAGES` ("walked", "no_lego_build", "no_turn" or "failed" here).
+        stage: its `Stage` (walked, no LEGO build, no turn or failed here).
         key: the leg's key (`LegRecipe.key`; "" when no leg was built).
-        rows: a walk-map row (`sim.robot.walk_map.COLUMNS`, cell -1) per floor of `WALK_ORDER`.
+        rows: a walk row (cell -1) per floor of `WALK_ORDER`.
         compute_s: the time the build and the walks took.
     """
 
-    stage: str
+    stage: Stage
     key: str
-    rows: tuple[dict, ...]
+    rows: tuple[WalkRow, ...]
     compute_s: float
 
 
@@ -126,55 +126,62 @@ def walk_candidate(
     start = time.perf_counter()
     base = {"cell": -1, "seconds": float(seconds)}
 
-    def done(stage: str, key: str, rows: list[dict]) -> CandidateWalk:
+    def done(stage: Stage, key: str, rows: list[WalkRow]) -> CandidateWalk:
         return CandidateWalk(stage, key, tuple(rows), time.perf_counter() - start)
 
     try:
         recipe, leg = recipe_and_leg(genome, mode)
     except LegError as exc:
-        return done("no_turn", "", [map_row(base, f, "walked", breaks=True, reason=str(exc))
-                                    for f in WALK_ORDER])  # fmt: skip
+        return done(
+            Stage.NO_TURN,
+            "",
+            [map_row(base, f, Status.WALKED, breaks=True, reason=str(exc)) for f in WALK_ORDER],
+        )
     except Exception as exc:  # recorded per candidate, the batch goes on
-        return done("failed", "", [map_row(base, f, "failed", reason=error_text(exc))
-                                   for f in WALK_ORDER])  # fmt: skip
+        return done(
+            Stage.FAILED,
+            "",
+            [map_row(base, f, Status.FAILED, reason=error_text(exc)) for f in WALK_ORDER],
+        )
     if recipe.note:
-        rows = [map_row(base, f, "not buildable", reason=recipe.note) for f in WALK_ORDER]
-        return done("no_lego_build", recipe.key, rows)
+        rows = [map_row(base, f, Status.NOT_BUILDABLE, reason=recipe.note) for f in WALK_ORDER]
+        return done(Stage.NO_LEGO_BUILD, recipe.key, rows)
     if recipe.key in known:
-        return done("cached", recipe.key, [])
+        return done(Stage.CACHED, recipe.key, [])
     settings = search_walk_settings(seconds)
     rows = []
     for floor in WALK_ORDER:
         if rows and rows[-1]["breaks"]:
             reason = f"not walked: it breaks on {rows[-1]['floor']}"
-            rows.append(map_row(base, floor, "not walked", breaks=True, reason=reason,
-                                leg="LEGO build"))  # fmt: skip
+            rows.append(
+                map_row(base, floor, Status.NOT_WALKED, breaks=True, reason=reason, leg=LEGO_BUILD)
+            )
             continue
         if rows and -credited_cm(rows[-1]) >= bar:
             reason = f"not walked: {rows[-1]['floor']} alone keeps it out of the search"
-            rows.append(map_row(base, floor, "not walked", reason=reason, leg="LEGO build"))
+            rows.append(map_row(base, floor, Status.NOT_WALKED, reason=reason, leg=LEGO_BUILD))
             continue
         try:
             w = walk(leg, FLOORS[floor], settings=settings, physics=physics)
         except Exception as exc:  # recorded per candidate, the batch goes on
-            failed = [map_row(base, f, "failed", reason=error_text(exc)) for f in WALK_ORDER]
-            return done("failed", recipe.key, failed)
-        rows.append(walked_row(base, floor, w, "LEGO build"))
-    return done("walked", recipe.key, rows)
+            failed = [map_row(base, f, Status.FAILED, reason=error_text(exc)) for f in WALK_ORDER]
+            return done(Stage.FAILED, recipe.key, failed)
+        rows.append(walked_row(base, floor, w, LEGO_BUILD))
+    return done(Stage.WALKED, recipe.key, rows)
 
 
-def floor_losses(stage: str, rows: dict[str, dict]) -> np.ndarray:
-    """Returns (2,) a built candidate's loss on each of `OBJECTIVE_FLOORS`.
+def floor_losses(stage: Stage, rows: dict[str, WalkRow]) -> np.ndarray:
+    """Returns (2,) a built candidate's loss on each of `FLOOR_ORDER` (F_w2's objectives).
 
     Args:
         stage: the candidate's stage (any but "rejected").
         rows: its row per floor (a walked or cached candidate's walk-map rows).
     """
-    if stage not in ("walked", "cached", "seeded"):
+    if stage not in TOLD_STAGES:
         return np.full(2, NO_LEG_LOSS)
     losses = {}
     for floor, row in rows.items():
-        if row["status"] != "walked":
+        if row["status"] != Status.WALKED:
             continue
         distance = credited_cm(row)
         if row["breaks"]:
@@ -182,15 +189,7 @@ def floor_losses(stage: str, rows: dict[str, dict]) -> np.ndarray:
         else:
             losses[floor] = -distance
     worst = max(losses.values())  # a floor not walked takes the floor where it broke
-    return np.array([losses.get(f, worst) for f in OBJECTIVE_FLOORS])
-
-
-def credited_cm(row: dict) -> float:
-    """Returns the distance a walk-map row's walk is credited, in cm per the study's 10 s:
-    what it walked in its `seconds`, at most its level-body no-slip bound (`bound_cm`)."""
-    distance, bound = row["mean_distance_cm"], row["bound_cm"]
-    walked = min(distance, bound) if math.isfinite(bound) else distance
-    return walked * WALK_SECONDS / row["seconds"]
+    return np.array([losses.get(f, worst) for f in FLOOR_ORDER])
 
 
 def rejected_loss(failed_angles: np.ndarray, checks: PhysicalChecks) -> np.ndarray:

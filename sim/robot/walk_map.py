@@ -15,7 +15,6 @@ repertoire have 5,202 distinct legs), and the walk is deterministic, so each dis
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
@@ -24,31 +23,21 @@ import numpy as np
 
 from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS, Physics
 from linkevo.sim.robot.leg import LegError, LegRecipe, leg_recipe
-from linkevo.sim.robot.walking import Walk, WalkSettings, walk
+from linkevo.sim.robot.walk_rows import (
+    AS_EVOLVED,
+    LEGO_BUILD,
+    Status,
+    WalkRow,
+    error_text,
+    map_row,
+    walked_row,
+)
+from linkevo.sim.robot.walking import WalkSettings, walk
 
 WALK_MAP_STEP_S = 0.004
 """A walk-map walk's physics step, twice Table I's: it ranks cells as Table I's walks do
 (docs/walking.md) at about 60 % of the cost; a walk that blows up is walked again at half
 the step, as every walk is."""
-COLUMNS = (
-    "cell",
-    "floor",
-    "status",
-    "mean_distance_cm",
-    "breaks",
-    "reason",
-    "leg",
-    "bound_cm",
-    "torque_p95_of_stall",
-    "pin_force_p99_n",
-    "seconds",
-)
-"""A walk-map row, per cell and floor. status: "walked", "not buildable" (no whole-module
-rounding of the linkage turns; walked only with `as_evolved`), "not walked" (the walking
-fitness walks no second floor for a leg that broke on the first, `sim.robot.walk_fitness`), or
-"failed" (the reason is the error)."""
-STATUSES = frozenset({"walked", "not buildable", "not walked", "failed"})
-"""Every status a walk-map row may have."""
 
 
 @dataclass(frozen=True)
@@ -71,7 +60,7 @@ class BuiltCell:
     cell: int
     floors: tuple[str, ...]
     recipe: LegRecipe | None = None
-    rows: list[dict] = field(default_factory=list)
+    rows: list[WalkRow] = field(default_factory=list)
 
 
 @dataclass(frozen=True)
@@ -106,17 +95,21 @@ def build_cells(batch: CellBatch) -> list[BuiltCell]:
         try:
             recipe = leg_recipe(genome, batch.mode)
         except LegError as exc:
-            rows = [map_row(base, f, "walked", breaks=True, reason=str(exc)) for f in batch.floors]
+            rows = [
+                map_row(base, f, Status.WALKED, breaks=True, reason=str(exc)) for f in batch.floors
+            ]
         except Exception as exc:  # recorded per cell, the batch goes on
-            rows = [map_row(base, f, "failed", reason=error_text(exc)) for f in batch.floors]
+            rows = [map_row(base, f, Status.FAILED, reason=error_text(exc)) for f in batch.floors]
         if recipe is not None and recipe.note and not batch.as_evolved:
-            rows = [map_row(base, f, "not buildable", reason=recipe.note) for f in batch.floors]
+            rows = [
+                map_row(base, f, Status.NOT_BUILDABLE, reason=recipe.note) for f in batch.floors
+            ]
             recipe = None
         out.append(BuiltCell(int(cell), batch.floors, recipe=recipe, rows=rows))
     return out
 
 
-def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
+def walk_legs(batch: LegBatch) -> dict[str, list[WalkRow]]:
     """Returns each leg's rows (one per floor, `cell` -1 until a cell takes them), by name.
 
     A walk that raises is recorded as that floor's "failed" row with the error.
@@ -125,12 +118,13 @@ def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
     out = {}
     for key, recipe in batch.recipes.items():
         base = {"cell": -1, "seconds": float(batch.seconds)}
-        kind = "as evolved" if recipe.note else "LEGO build"
+        kind = AS_EVOLVED if recipe.note else LEGO_BUILD
         try:
             leg = recipe.leg()
         except Exception as exc:  # recorded per leg, the batch goes on
             out[key] = [
-                map_row(base, f, "failed", reason=error_text(exc), leg=kind) for f in batch.floors
+                map_row(base, f, Status.FAILED, reason=error_text(exc), leg=kind)
+                for f in batch.floors
             ]
             continue
         rows = []
@@ -138,7 +132,7 @@ def walk_legs(batch: LegBatch) -> dict[str, list[dict]]:
             try:
                 w = walk(leg, FLOORS[floor], settings=settings, physics=batch.physics)
             except Exception as exc:  # recorded per leg and floor
-                rows.append(map_row(base, floor, "failed", reason=error_text(exc), leg=kind))
+                rows.append(map_row(base, floor, Status.FAILED, reason=error_text(exc), leg=kind))
                 continue
             rows.append(walked_row(base, floor, w, kind))
         out[key] = rows
@@ -165,7 +159,7 @@ def group_legs(built: list[BuiltCell]) -> list[LegToWalk]:
     return list(groups.values())
 
 
-def rows_for_cells(rows: list[dict], cells: list[int]) -> list[dict]:
+def rows_for_cells(rows: list[WalkRow], cells: list[int]) -> list[WalkRow]:
     """Returns a leg's rows (`walk_legs`) as every cell's that builds it."""
     return [{**row, "cell": int(cell)} for cell in cells for row in rows]
 
@@ -193,7 +187,7 @@ def walk_rows(
     seconds: float,
     legs_per_task: int,
     physics: Physics | None = None,
-) -> Iterator[tuple[int, list[dict]]]:
+) -> Iterator[tuple[int, list[WalkRow]]]:
     """Yields, as each task ends, how many cells it built and the rows it settled: while
     the legs are built, the rows of the cells that are not walked; then each distinct
     leg's walks as the rows of every cell that builds it.
@@ -217,82 +211,10 @@ def walk_rows(
             yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
 
 
-def walk_cells(batch: CellBatch, physics: Physics | None = None) -> list[dict]:
+def walk_cells(batch: CellBatch, physics: Physics | None = None) -> list[WalkRow]:
     """Returns a row (`COLUMNS`) per cell and floor of the batch, walked in this process
     (`walk_rows` with every leg in one task) on the robot `physics` describes."""
     legs = max(1, len(batch.cells))
     rows = [r for _, part in walk_rows(map, [batch], batch.seconds, legs, physics) for r in part]
     cell_order = {int(c): i for i, c in enumerate(batch.cells)}
     return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))
-
-
-def walk_map_frame(rows: list[dict]):
-    """Returns walk-map rows (`COLUMNS`) as a pandas table with the columns' own dtypes
-    (int64 cell, bool breaks, float64 figures), also when there are none."""
-    import pandas as pd
-
-    frame = pd.DataFrame(rows, columns=list(COLUMNS))
-    return frame.astype(
-        {
-            "cell": "int64",
-            "floor": "str",
-            "status": "str",
-            "mean_distance_cm": "float64",
-            "breaks": "bool",
-            "reason": "str",
-            "leg": "str",
-            "bound_cm": "float64",
-            "torque_p95_of_stall": "float64",
-            "pin_force_p99_n": "float64",
-            "seconds": "float64",
-        }
-    )
-
-
-def walked_row(base: dict, floor: str, w: Walk, leg: str) -> dict:
-    """Returns the row of a walk on `floor` (`leg`: "LEGO build" or "as evolved")."""
-    return map_row(
-        base,
-        floor,
-        "walked",
-        distance=w.distance_m * 100,
-        breaks=w.breaks,
-        reason=w.reason,
-        leg=leg,
-        bound=w.bound_m * 100,
-        torque=w.torque_p95,
-        pins=w.pin_force_n[2],
-    )
-
-
-def map_row(
-    base: dict,
-    floor: str,
-    status: str,
-    *,
-    distance: float = math.nan,
-    breaks: bool = False,
-    reason: str = "",
-    leg: str = "",
-    bound: float = math.nan,
-    torque: float = math.nan,
-    pins: float = math.nan,
-) -> dict:
-    """Returns a row (`COLUMNS`) from `base` (its cell and seconds) and the figures."""
-    return {
-        **base,
-        "floor": floor,
-        "status": status,
-        "mean_distance_cm": float(distance),
-        "breaks": bool(breaks),
-        "reason": reason,
-        "leg": leg,
-        "bound_cm": float(bound),
-        "torque_p95_of_stall": float(torque),
-        "pin_force_p99_n": float(pins),
-    }
-
-
-def error_text(exc: Exception) -> str:
-    """The row's reason for an error: its type and message."""
-    return f"{type(exc).__name__}: {exc}"

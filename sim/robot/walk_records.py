@@ -1,15 +1,14 @@
-"""Provides a walk's records (`WalkRecords`, preallocated per control tick) and its break
-rules followed as it goes (`WalkWatch`), for the walk loop of `sim.robot.walking`."""
+"""Provides a walk's per-tick records (`WalkRecords`, preallocated for the walk loop of
+`sim.robot.walking`) and the figures computed from them: heading (`yaw_of`, `wrap_angle`)
+and the feet's slip (`foot_slip`)."""
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
+import math
 from dataclasses import dataclass
 
 import numpy as np
-
-from linkevo.sim.robot.walk_figures import BreakWatch
 
 
 @dataclass
@@ -60,41 +59,22 @@ class WalkRecords:
         )
 
 
-class WalkWatch:
-    """A walk's break rules followed as it goes (`sim.robot.walk_figures.BreakWatch`), with the
-    pin forces of the samples so far (computed once, kept for the walk's figures)."""
+def yaw_of(mat: np.ndarray) -> float:
+    return math.atan2(mat[3], mat[0])
 
-    def __init__(self, ticks: int, samples: int) -> None:
-        self.samples = samples
-        self.rules = BreakWatch(ticks, 0)
-        self._ticks = 0
-        self._samples = 0
-        self._pins: list[np.ndarray] = []
 
-    def follow(
-        self,
-        rec: WalkRecords,
-        ticks: int,
-        samples: int,
-        pin_forces: Callable[[np.ndarray], np.ndarray],
-        lag_deg: Callable[[np.ndarray, np.ndarray], np.ndarray],
-    ) -> None:
-        """Takes the records up to `ticks` ticks and `samples` load samples.
+def wrap_angle(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
 
-        Args:
-            pin_forces: the robot's pin forces (flat) of load samples (`LegLoads`).
-            lag_deg: (6,) each leg's largest lag behind the clock over ticks' times (k,)
-                and phases (k, 6).
-        """
-        new = slice(self._ticks, ticks)
-        pins = pin_forces(rec.loads[self._samples : samples])
-        if self._samples == 0 and samples:
-            self.rules.pins_total = len(pins) // samples * self.samples
-        lag = lag_deg(rec.t[new], rec.phase[new])
-        self.rules.add(rec.frame[new], rec.limited[new], lag, pins)
-        self._pins.append(pins)
-        self._ticks, self._samples = ticks, samples
 
-    def pins(self) -> np.ndarray:
-        """Every pin force over the samples followed (flat)."""
-        return np.concatenate(self._pins) if self._pins else np.zeros(0)
+def foot_slip(feet: np.ndarray, contact: np.ndarray, t: np.ndarray) -> float:
+    """Mean horizontal foot speed (mm/s) while a foot is down: its leg touches the floor
+    and the foot is within 3 mm of the lowest height it reaches, over the feet (T, 6, 3)
+    and contacts (T, 6) sampled at times t (T,)."""
+    if len(t) < 2:
+        return math.nan
+    down = contact & (feet[:, :, 2] <= feet[:, :, 2].min(axis=0) + 0.003)
+    both = down[1:] & down[:-1]
+    dt = np.diff(t)[:, None]
+    step = np.linalg.norm(np.diff(feet[:, :, :2], axis=0), axis=2) / np.where(dt > 0, dt, np.inf)
+    return float(step[both].mean() * 1000) if both.any() else math.nan

@@ -11,14 +11,17 @@ leg's phase within the alignment tolerance (±3°).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 
+from linkevo.sim.robot.breaks import BreakWatch, break_reason
 from linkevo.sim.robot.frailty import Frailty, judge_frailty
 from linkevo.sim.robot.full_model import TIMESTEP_S, build_robot
 from linkevo.sim.robot.gait import GaitConfig, PhasePid
@@ -34,9 +37,8 @@ from linkevo.sim.robot.hexapod import (
 )
 from linkevo.sim.robot.lean_model import LEAN_TIMESTEP_S, build_lean_robot
 from linkevo.sim.robot.leg import Leg
-from linkevo.sim.robot.model import RobotModel, control_tick, quiet_engine
-from linkevo.sim.robot.walk_figures import break_reason, foot_slip, wrap_angle, yaw_of
-from linkevo.sim.robot.walk_records import WalkRecords, WalkWatch
+from linkevo.sim.robot.model import RobotModel, control_tick
+from linkevo.sim.robot.walk_records import WalkRecords, foot_slip, wrap_angle, yaw_of
 
 MODELS = dict(
     zip(ROBOT_MODELS, ((build_lean_robot, LEAN_TIMESTEP_S), (build_robot, TIMESTEP_S)), strict=True)
@@ -69,7 +71,7 @@ class WalkSettings:
             one. The same walk to rounding (1e-12 m apart after 3 s on study legs), 1.3-1.5x
             faster on the lean model; walk maps use it, Table I's predictions are dense.
         stop_at_break: end the walk once the break rules are certain to call it broken
-            (`sim.robot.walk_figures.BreakWatch`, checked every `BREAK_CHECK_TICKS`); its figures
+            (`sim.robot.breaks.BreakWatch`, checked every `BREAK_CHECK_TICKS`); its figures
             are then those of the stretch walked (the walking fitness's walks). A walk that
             does not break is the same walk either way.
     """
@@ -254,7 +256,7 @@ class _Run:
         every = self.settings.loads_every
         samples = -(-n_ticks // every)
         rec = WalkRecords.empty(n_ticks, samples, m.nq, robot.loads.width)
-        watch = WalkWatch(n_ticks, samples) if self.settings.stop_at_break else None
+        watch = BreakWatch(n_ticks, samples) if self.settings.stop_at_break else None
         for tick in range(n_ticks):
             if not self._tick(pid):
                 return self._diverged()
@@ -265,7 +267,7 @@ class _Run:
             if watch and (done % BREAK_CHECK_TICKS == 0 or done == n_ticks):
                 lag = functools.partial(self.lag_deg, pid)
                 watch.follow(rec, done, -(-done // every), robot.loads.pin_forces, lag)
-                if watch.rules.broken() and done < n_ticks:
+                if watch.broken() and done < n_ticks:
                     return self._result(rec.head(done, every), pid, p0, yaw0, watch.pins())
         return self._result(rec, pid, p0, yaw0, watch.pins() if watch else None)
 
@@ -276,8 +278,9 @@ class _Run:
         """One control tick (`sim.robot.model.control_tick`): the gait's command as the
         motors' speed goal."""
         d, motor, robot = self.data, self.motor, self.robot
-        rpm = np.clip(pid.rpm(d.time, self.phases()), -motor.velocity_limit_rpm,
-                      motor.velocity_limit_rpm)  # fmt: skip
+        rpm = np.clip(
+            pid.rpm(d.time, self.phases()), -motor.velocity_limit_rpm, motor.velocity_limit_rpm
+        )
         control_tick(robot, d, rpm * (2 * math.pi / 60), self.tick_steps)
         # MuJoCo resets the state when accelerations blow up, and counts it as a warning.
         blown = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
@@ -377,14 +380,42 @@ class _Run:
     def _diverged(self) -> Walk:
         nan = math.nan
         return Walk(
-            nan, nan, nan, nan, nan, nan, nan, nan, nan, nan, np.full(6, nan), nan,
-            (nan, nan, nan, nan), nan, nan, True,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            nan,
+            np.full(6, nan),
+            nan,
+            (nan, nan, nan, nan),
+            nan,
+            nan,
+            True,
             "the simulation diverged (a loop flew apart): the linkage cannot be assembled "
             "as a rigid LEGO build",
             {},
             timestep=self.settings.step,
             diverged=True,
-        )  # fmt: skip
+        )
+
+
+@contextlib.contextmanager
+def quiet_engine() -> Iterator[None]:
+    """Keeps MuJoCo's warnings out of `MUJOCO_LOG.TXT` in the user's working directory.
+
+    A walk reads the engine's warnings off `MjData.warning` (`sim.robot.walking`) instead.
+    """
+    previous = mujoco.get_mju_user_warning()
+    mujoco.set_mju_user_warning(lambda _message: None)
+    try:
+        yield
+    finally:
+        mujoco.set_mju_user_warning(previous)
 
 
 def field_trials(

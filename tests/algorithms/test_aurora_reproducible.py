@@ -21,8 +21,13 @@ def test_a_map_au_trial_is_the_same_compiled_for_the_baseline_x86_64(tmp_path) -
     env = {**os.environ, "NUMBA_CPU_NAME": "generic", "NUMBA_CACHE_DIR": str(tmp_path)}
     run = subprocess.run(
         [sys.executable, "-m", "tests.helpers.aurora_fingerprint"],
-        cwd=ROOT, env=env, capture_output=True, text=True, timeout=600, check=True,
-    )  # fmt: skip
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=True,
+    )
     generic = json.loads(run.stdout.strip().splitlines()[-1])
     assert int(here["elites"]) > 100
     assert generic == here

@@ -8,8 +8,9 @@ import pytest
 import torch
 from scipy.stats import spearmanr
 
-from linkevo.algorithms.walk_model import FLOORS, WalkData, WalkModel
+from linkevo.algorithms.walk_model import WalkData, WalkModel
 from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER
 
 
 def synthetic(n: int, seed: int) -> WalkData:
@@ -26,10 +27,10 @@ def test_it_ranks_unseen_walks_and_tells_breaks_apart():
     model = WalkModel(6).fit(synthetic(600, 0), seed=1)
     test = synthetic(300, 9)
     prediction = model.predict(test.features)
-    for k in range(len(FLOORS)):
+    for k in range(len(FLOOR_ORDER)):
         sound = np.isfinite(test.distance[:, k])
         rho = spearmanr(prediction.distance[sound, k], test.distance[sound, k]).statistic
-        assert rho > 0.9, FLOORS[k]
+        assert rho > 0.9, FLOOR_ORDER[k]
         broke = test.breaks[:, k] > 0
         assert prediction.p_break[broke, k].mean() > prediction.p_break[~broke, k].mean() + 0.4
     assert (prediction.spread >= 0).all() and prediction.spread.shape == (300, 2)

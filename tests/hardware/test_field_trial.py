@@ -63,9 +63,24 @@ def source_run(store, tmp_path, approach, genomes=None, grid="", best=BEST_DOC):
 
 
 def trial(uri, cfg, linkage, floor, distances, *extra):
-    argv = ["hexapod", "trial", "--linkage", linkage, "--floor", floor, "--emulate",
-            "--config", str(cfg), "--seconds", "0.2", "--repeats", str(len(distances)),
-            "--tracking-uri", uri, *extra]  # fmt: skip
+    argv = [
+        "hexapod",
+        "trial",
+        "--linkage",
+        linkage,
+        "--floor",
+        floor,
+        "--emulate",
+        "--config",
+        str(cfg),
+        "--seconds",
+        "0.2",
+        "--repeats",
+        str(len(distances)),
+        "--tracking-uri",
+        uri,
+        *extra,
+    ]
     if distances:
         argv += ["--distance-cm", *map(str, distances)]
     return main(argv)
@@ -156,9 +171,25 @@ def test_cell_reference_builds_the_document_from_the_repertoire_genome(
     genome = np.random.default_rng(7).random(56)
     run_id = source_run(store, tmp_path, "MAP-LIS", {17: genome, 4242: np.full(56, 0.3)})
     monkeypatch.setattr("sys.stdin", io.StringIO("not a number\n40.4\n"))
-    argv = ["hexapod", "trial", "--linkage", f"{run_id}:17", "--floor", "carpet", "--emulate",
-            "--config", str(config_file("/dev/unused")), "--seconds", "0.2", "--repeats", "1",
-            "--tracking-uri", uri, "--robot", "modified"]  # fmt: skip
+    argv = [
+        "hexapod",
+        "trial",
+        "--linkage",
+        f"{run_id}:17",
+        "--floor",
+        "carpet",
+        "--emulate",
+        "--config",
+        str(config_file("/dev/unused")),
+        "--seconds",
+        "0.2",
+        "--repeats",
+        "1",
+        "--tracking-uri",
+        uri,
+        "--robot",
+        "modified",
+    ]
     assert main(argv) == 0
     (run,) = client.search_runs(
         [experiment_id], "tags.`linkevo.kind` = 'field_trial' and tags.source_cell = '17'"
@@ -186,8 +217,20 @@ def test_cell_reference_builds_the_document_from_the_repertoire_genome(
 )
 def test_bad_trial_arguments_are_usage_errors(argv_tail, message, tmp_path, config_file, capsys):
     uri = f"sqlite:///{tmp_path / 'never-created.db'}"
-    argv = ["hexapod", "trial", "--linkage", "abc", "--floor", "flat", "--emulate",
-            "--config", str(config_file("x")), "--tracking-uri", uri, *argv_tail]  # fmt: skip
+    argv = [
+        "hexapod",
+        "trial",
+        "--linkage",
+        "abc",
+        "--floor",
+        "flat",
+        "--emulate",
+        "--config",
+        str(config_file("x")),
+        "--tracking-uri",
+        uri,
+        *argv_tail,
+    ]
     assert main(argv) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / "never-created.db").exists()
@@ -203,9 +246,23 @@ def test_unknown_run_and_cell_are_named(store, tmp_path, config_file, capsys):
         (f"{run_id}:x", "expected RUN_ID, RUN_ID:CELL"),
         (f"{run_id}:1,2,3", "the repertoire has 2 descriptors, so give 2 bin coordinates"),
     ]:
-        argv = ["hexapod", "trial", "--linkage", linkage, "--floor", "flat", "--emulate",
-                "--config", cfg, "--tracking-uri", uri, "--repeats", "1",
-                "--distance-cm", "1"]  # fmt: skip
+        argv = [
+            "hexapod",
+            "trial",
+            "--linkage",
+            linkage,
+            "--floor",
+            "flat",
+            "--emulate",
+            "--config",
+            cfg,
+            "--tracking-uri",
+            uri,
+            "--repeats",
+            "1",
+            "--distance-cm",
+            "1",
+        ]
         assert main(argv) == 2
         assert message in capsys.readouterr().err
 

@@ -27,16 +27,29 @@ def test_simulated_three_second_walk_accounts_for_every_50_hz_slot(config_file, 
     telemetry = tmp_path / "out" / "walk.csv"
     cfg = config_file("/dev/unused")
     code = main(
-        ["hexapod", "walk", "--config", str(cfg), "--seconds", "3", "--emulate",
-         "--telemetry", str(telemetry)]
-    )  # fmt: skip
+        [
+            "hexapod",
+            "walk",
+            "--config",
+            str(cfg),
+            "--seconds",
+            "3",
+            "--emulate",
+            "--telemetry",
+            str(telemetry),
+        ]
+    )
     assert code == 0
     with open(telemetry, newline="", encoding="utf-8") as f:
         rows = list(csv.reader(f))
     header, body = rows[0], rows[1:]
     assert header[:5] == [
-        "time_s", "m1_position", "m1_velocity_rpm", "m1_load_percent", "m1_temperature_c"
-    ]  # fmt: skip
+        "time_s",
+        "m1_position",
+        "m1_velocity_rpm",
+        "m1_load_percent",
+        "m1_temperature_c",
+    ]
     assert len(header) == 1 + 4 * len(TEST_IDS)
     out = capsys.readouterr().out
     counts = re.search(r"(\d+) ticks at .* skipped (\d+), missed reads (\d+),", out)
@@ -61,8 +74,10 @@ def test_simulate_physics_walks_a_linkage_document_and_refuses_bad_input(config_
     ):
         assert main([*base, *extra]) == 2
         assert message in capsys.readouterr().err
-    assert main(["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--emulate",
-                 "gazebo"]) == 2  # fmt: skip
+    assert (
+        main(["hexapod", "walk", "--config", str(cfg), "--seconds", "1", "--emulate", "gazebo"])
+        == 2
+    )
     assert "--emulate: invalid choice: 'gazebo' (choose from 'bus', 'physics')" in (
         capsys.readouterr().err
     )

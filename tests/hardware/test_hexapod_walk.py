@@ -67,11 +67,19 @@ def test_start_up_align_and_walk_write_in_the_documented_order(emulator, config_
     profile = round(ct.rpm_to_units(config.align.profile_velocity_rpm))
     watchdog = config.safety.bus_watchdog_ms // 20
     expected = [
-        (64, 0), (98, 0), (9, 0),  # start-up: torque off, watchdog off, return delay 0
-        (11, 3), (112, profile), (64, 1), (64, 0),  # align in position mode
-        (11, 1), (104, 0), (64, 1), (98, watchdog),  # velocity mode, then walk
+        (64, 0),
+        (98, 0),
+        (9, 0),  # start-up: torque off, watchdog off, return delay 0
+        (11, 3),
+        (112, profile),
+        (64, 1),
+        (64, 0),  # align in position mode
+        (11, 1),
+        (104, 0),
+        (64, 1),
+        (98, watchdog),  # velocity mode, then walk
         (64, 0),  # shutdown
-    ]  # fmt: skip
+    ]
     for motor_id in TEST_IDS:
         writes = [
             (w.address, w.value)

@@ -28,8 +28,14 @@ def record_trials(root: Path, grid: str, specs: list[TrialSpec]) -> tuple[str, d
     runs = {}
     for spec in specs:
         key = f"{spec.approach}/{spec.fitness}/00"
-        tags = {"grid_id": grid, "linkevo.kind": "trial", "approach": spec.approach,
-                "fitness": spec.fitness, "trial_key": key, "trial_index": "0"}  # fmt: skip
+        tags = {
+            "grid_id": grid,
+            "linkevo.kind": "trial",
+            "approach": spec.approach,
+            "fitness": spec.fitness,
+            "trial_key": key,
+            "trial_index": "0",
+        }
         run_id = client.create_run(experiment, run_name=key, tags=tags).info.run_id
         values = asdict(spec)
         client.log_batch(run_id, params=[Param(k, str(values[k])) for k in SPEC_PARAMS])

@@ -57,11 +57,25 @@ def field_trials(tmp_path_factory):
             walked = simulated_cm(hidden, [FieldTrial("", doc, floor, SECONDS, 0.0)])[0]
             source = SourceLinkage(f"run{n}", None, experiment, "MAP-LIS", "Fp", doc, "")
             params = {"seconds": str(SECONDS), "repeats": "1", "simulated": REAL}
-            runs.append(log_field_trial(uri, source, robot="first", floor=floor,
-                                        distances=[float(walked)], params=params))  # fmt: skip
+            runs.append(
+                log_field_trial(
+                    uri,
+                    source,
+                    robot="first",
+                    floor=floor,
+                    distances=[float(walked)],
+                    params=params,
+                )
+            )
     source = SourceLinkage("runsim", None, experiment, "MAP-LIS", "Fp", docs[0], "")
-    simulated = log_field_trial(uri, source, robot="first", floor="flat", distances=[1.0],
-                                params={"seconds": "2.0", "simulated": PHYSICS})  # fmt: skip
+    simulated = log_field_trial(
+        uri,
+        source,
+        robot="first",
+        floor="flat",
+        distances=[1.0],
+        params={"seconds": "2.0", "simulated": PHYSICS},
+    )
     (root / "leg.json").write_text(json.dumps(docs[0]))
     return uri, runs, simulated, root
 
@@ -77,8 +91,21 @@ def test_calibration_recovers_the_hidden_speed_and_writes_a_config_commands_take
 ):
     uri, runs, _, root = field_trials
     out = tmp_path / "calibrated.toml"
-    argv = ["hexapod", "calibrate", "--trials", *runs, "--params", "speed_rpm", "--out",
-            str(out), "--folds", "2", "--json", "--tracking-uri", uri]  # fmt: skip
+    argv = [
+        "hexapod",
+        "calibrate",
+        "--trials",
+        *runs,
+        "--params",
+        "speed_rpm",
+        "--out",
+        str(out),
+        "--folds",
+        "2",
+        "--json",
+        "--tracking-uri",
+        uri,
+    ]
     assert main(argv) == 0
     report = json.loads(capsys.readouterr().out)
     speed = report["params"]["speed_rpm"]
@@ -93,9 +120,26 @@ def test_calibration_recovers_the_hidden_speed_and_writes_a_config_commands_take
     assert "calibrated by linkevo hexapod calibrate from 4 field trials" in out.read_text()
     assert tomllib.loads(out.read_text())["motors"]  # the rest of the base config is kept
     capsys.readouterr()
-    code = main(["hexapod", "simulate", "--linkage", str(root / "leg.json"), "--floor", "flat",
-                 "--seconds", str(SECONDS), "--repeats", "1", "--json", "--no-log",
-                 "--config", str(out), "--tracking-uri", uri])  # fmt: skip
+    code = main(
+        [
+            "hexapod",
+            "simulate",
+            "--linkage",
+            str(root / "leg.json"),
+            "--floor",
+            "flat",
+            "--seconds",
+            str(SECONDS),
+            "--repeats",
+            "1",
+            "--json",
+            "--no-log",
+            "--config",
+            str(out),
+            "--tracking-uri",
+            uri,
+        ]
+    )
     assert code == 0
     walked = json.loads(capsys.readouterr().out)["mean_distance_cm"]
     hidden = with_values(load_config(sim_config()), {"speed_rpm": HIDDEN_SPEED_RPM})

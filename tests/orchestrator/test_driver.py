@@ -146,8 +146,13 @@ def test_a_copied_or_moved_store_keeps_working_and_never_writes_into_the_other(
     assert len(summaries) == 1
     shutil.copytree(tmp_path / "store", tmp_path / "copy")
     copied = f"sqlite:///{tmp_path / 'copy' / 'mlflow.db'}"
-    again = launch(tiny_grid(tmp_path, tracking_uri=copied, approaches=["MAP-LIS"],
-                             fitnesses=["Fp"], trials=1), resume=True, progress=False)  # fmt: skip
+    again = launch(
+        tiny_grid(
+            tmp_path, tracking_uri=copied, approaches=["MAP-LIS"], fitnesses=["Fp"], trials=1
+        ),
+        resume=True,
+        progress=False,
+    )
     assert again.parent_run_id == first.parent_run_id and not again.failed
     assert {p: p.read_bytes() for p in original.rglob("grid_summary.json")} == summaries
     assert list((tmp_path / "copy" / "mlartifacts").rglob("grid_summary.json"))
@@ -155,8 +160,10 @@ def test_a_copied_or_moved_store_keeps_working_and_never_writes_into_the_other(
     (tmp_path / "copy").rename(tmp_path / "moved")
     moved = f"sqlite:///{tmp_path / 'moved' / 'mlflow.db'}"
     out = tmp_path / "pulled"
-    assert main(["pull", grid.grid_id, "--best", "--any", "--tracking-uri", moved,
-                 "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(["pull", grid.grid_id, "--best", "--any", "--tracking-uri", moved, "--out", str(out)])
+        == 0
+    )
     assert (out / "linkage.json").is_file()
     page = tmp_path / "page.html"
     assert main(["explore", grid.grid_id, "--tracking-uri", moved, "--out", str(page)]) == 0
@@ -228,8 +235,16 @@ def test_killed_driver_resumes_only_the_missing_trials(ray_local, tmp_path, monk
     grid = tiny_grid(tmp_path, approaches=["MAP-LIS"], evaluations=1000)
     uri = grid.config.tracking_uri
     address = ray_local.get_runtime_context().gcs_address
-    command = [sys.executable, "-c", LINKEVO, "grid", str(tmp_path / "tiny.toml"),
-               "--address", address, "--no-progress"]  # fmt: skip
+    command = [
+        sys.executable,
+        "-c",
+        LINKEVO,
+        "grid",
+        str(tmp_path / "tiny.toml"),
+        "--address",
+        address,
+        "--no-progress",
+    ]
     ensure_experiment(uri)  # the poll below must not race the driver's schema creation
     driver = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     poll_finished(uri, grid.grid_id, 1, driver)
@@ -272,8 +287,16 @@ def test_a_signal_leaves_no_running_trial_and_says_how_to_resume(
     )
     uri = grid.config.tracking_uri
     address = ray_local.get_runtime_context().gcs_address
-    command = [sys.executable, "-c", LINKEVO, "grid", str(tmp_path / "tiny.toml"),
-               "--address", address, "--no-progress"]  # fmt: skip
+    command = [
+        sys.executable,
+        "-c",
+        LINKEVO,
+        "grid",
+        str(tmp_path / "tiny.toml"),
+        "--address",
+        address,
+        "--no-progress",
+    ]
     ensure_experiment(uri)
     driver = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     poll_finished(uri, grid.grid_id, 1, driver)

@@ -83,8 +83,9 @@ def test_view_holds_every_cell_with_its_checks_and_drawing(store, tmp_path):
 
 def _page_views(path: Path) -> list[dict]:
     text = path.read_text(encoding="utf-8")
-    blobs = re.findall(r'<script type="application/octet-stream" id="trial-\d+">([^<]+)</script>',
-                       text)  # fmt: skip
+    blobs = re.findall(
+        r'<script type="application/octet-stream" id="trial-\d+">([^<]+)</script>', text
+    )
     return [json.loads(gzip.decompress(base64.b64decode(b))) for b in blobs]
 
 
@@ -111,8 +112,9 @@ def test_explore_a_grid_puts_every_repertoire_trial_on_one_page(store, tmp_path)
     assert main(args) == 0
     views = _page_views(out)
     assert [v["trial_key"] for v in views] == ["MAP-LIS/Fp/00", "MAP-ST/Fp/00"]  # study order
-    assert all(v["drawn"] == 20 and sum(c["g"] is not None for c in v["cells"]) == 20
-               for v in views)  # fmt: skip
+    assert all(
+        v["drawn"] == 20 and sum(c["g"] is not None for c in v["cells"]) == 20 for v in views
+    )
     client = MlflowClient(uri)
     parent = client.search_runs(
         [client.get_experiment_by_name("linkevo").experiment_id], "tags.`linkevo.kind` = 'grid'"
@@ -160,8 +162,9 @@ def test_page_in_chromium_hover_click_pin_filter_and_fold(store, tmp_path, brows
 
     uri, runs = store
     out = tmp_path / "st.html"
-    assert main(["explore", runs["MAP-ST"], "--tracking-uri", uri, "--out", str(out),
-                 "--no-log"]) == 0  # fmt: skip
+    assert (
+        main(["explore", runs["MAP-ST"], "--tracking-uri", uri, "--out", str(out), "--no-log"]) == 0
+    )
     view = _page_views(out)[0]
     open_explorer(browser, out)
     worst, best = view["cells"][-1], view["cells"][0]
@@ -277,15 +280,27 @@ def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, ml
 
 
 def test_a_walk_beyond_the_level_body_bound_is_flagged_in_the_view(store, tmp_path):
-    from linkevo.sim.robot.walk_map import walk_map_frame
+    from linkevo.sim.robot.walk_rows import walk_map_frame
 
     uri, runs = store
     table = RunStore(uri).repertoire(runs["MAP-LIS"], tmp_path)
     cells = table["cell"].to_numpy()[:2]
-    rows = [{"cell": int(c), "floor": "flat", "status": "walked", "mean_distance_cm": d,
-             "breaks": False, "reason": "", "leg": "LEGO build", "bound_cm": 100.0,
-             "torque_p95_of_stall": 0.3, "pin_force_p99_n": 10.0, "seconds": 10.0}
-            for c, d in zip(cells, (80.0, 130.0), strict=True)]  # fmt: skip
+    rows = [
+        {
+            "cell": int(c),
+            "floor": "flat",
+            "status": "walked",
+            "mean_distance_cm": d,
+            "breaks": False,
+            "reason": "",
+            "leg": "LEGO build",
+            "bound_cm": 100.0,
+            "torque_p95_of_stall": 0.3,
+            "pin_force_p99_n": 10.0,
+            "seconds": 10.0,
+        }
+        for c, d in zip(cells, (80.0, 130.0), strict=True)
+    ]
     trial = TrialRun(runs["MAP-LIS"], "MAP-LIS/Fp/00", "MAP-LIS", "Fp", "paper", 40)
     view = repertoire_view(table, trial, 0, walk_map_frame(rows))
     walks = {c["c"]: c["w"][0] for c in view["cells"] if c["c"] in set(cells.tolist())}

@@ -96,8 +96,12 @@ def test_a_lease_binds_while_renewed_by_a_live_process():
     me = Holder(os.uname().nodename, os.getpid(), now, now, "a")
     assert me.alive(now)
     assert not me.alive(now + LEASE_TTL_S + 1)  # not renewed: expired
-    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
-                          capture_output=True, text=True, check=True)  # fmt: skip
+    gone = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
     dead = Holder(os.uname().nodename, int(gone.stdout), now, now, "b")
     assert not dead.alive(now)  # this host, its process gone: free at once
     elsewhere = Holder("another-host", int(gone.stdout), now, now, "c")
@@ -131,8 +135,9 @@ def _alive(pids: set[int]) -> list[int]:
 
 def test_a_killed_driver_listened_on_loopback_left_nothing_and_is_resumed(tmp_path):
     path, uri, grid_id = _grid(tmp_path)
-    first = _Linkevo(tmp_path / "first.log", "grid", str(path), "--no-progress",
-                     start_new_session=True)  # fmt: skip
+    first = _Linkevo(
+        tmp_path / "first.log", "grid", str(path), "--no-progress", start_new_session=True
+    )
     try:
         _wait_for(lambda: first.running() and _one_finished(uri, grid_id), 300, "none finished")
         processes = set(tree(first.pid))  # the driver's Ray instance, trials and reaper

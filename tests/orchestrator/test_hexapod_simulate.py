@@ -76,16 +76,37 @@ def store(tmp_path_factory):
 def test_simulate_prints_the_table_one_json_and_logs_a_simulated_field_trial(store, capsys):
     uri, run_id, _ = store
     code = main(
-        ["hexapod", "simulate", "--linkage", run_id, "--floor", "carpet", "--seconds", "2",
-         "--repeats", "2", "--json", "--tracking-uri", uri]
-    )  # fmt: skip
+        [
+            "hexapod",
+            "simulate",
+            "--linkage",
+            run_id,
+            "--floor",
+            "carpet",
+            "--seconds",
+            "2",
+            "--repeats",
+            "2",
+            "--json",
+            "--tracking-uri",
+            uri,
+        ]
+    )
     assert code == 0
     result = json.loads(capsys.readouterr().out)
     assert result["floor"] == "carpet" and result["seconds"] == 2.0
     assert len(result["distance_cm"]) == 2 and result["mean_distance_cm"] > 1
     assert result["mean_distance_cm"] == pytest.approx(np.mean(result["distance_cm"]), abs=0.01)
-    for key in ("heading_drift_deg", "breaks", "reason", "torque_p95_of_stall", "pin_force_p99_n",
-                "loop_error_max_mm", "body_height_cm", "foot_slip_mm_s"):  # fmt: skip
+    for key in (
+        "heading_drift_deg",
+        "breaks",
+        "reason",
+        "torque_p95_of_stall",
+        "pin_force_p99_n",
+        "loop_error_max_mm",
+        "body_height_cm",
+        "foot_slip_mm_s",
+    ):
         assert key in result
     assert result["model"] == "lean"
     assert 0 <= result["foot_deviation_max_mm"] < 1.0  # the lean model keeps the feet on path
@@ -112,9 +133,24 @@ def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_pat
     doc.write_text(json.dumps(to_document(genomes[1])))
     out = tmp_path / "pics"
     code = main(
-        ["hexapod", "simulate", "--linkage", str(doc), "--floor", "flat", "--seconds", "1",
-         "--repeats", "1", "--no-log", "--out", str(out), "--model", "full"]
-    )  # fmt: skip
+        [
+            "hexapod",
+            "simulate",
+            "--linkage",
+            str(doc),
+            "--floor",
+            "flat",
+            "--seconds",
+            "1",
+            "--repeats",
+            "1",
+            "--no-log",
+            "--out",
+            str(out),
+            "--model",
+            "full",
+        ]
+    )
     assert code == 0
     text = capsys.readouterr().out
     assert "flat floor" in text and "distance" in text and "full model" in text
@@ -154,9 +190,22 @@ def test_study_predicts_first_and_modified_robots_from_the_5x5_map(store, tmp_pa
     uri, run_id, _ = store
     out = tmp_path / "study"
     code = main(
-        ["hexapod", "study", GRID, "--trials-drawn", "1", "--seconds", "1", "--repeats", "1",
-         "--out", str(out), "--tracking-uri", uri]
-    )  # fmt: skip
+        [
+            "hexapod",
+            "study",
+            GRID,
+            "--trials-drawn",
+            "1",
+            "--seconds",
+            "1",
+            "--repeats",
+            "1",
+            "--out",
+            str(out),
+            "--tracking-uri",
+            uri,
+        ]
+    )
     assert code == 0
     rows = list(csv.DictReader((out / "table1_predicted.csv").open()))
     assert [(r["approach"], r["draw"], r["robot"], r["floor"], r["model"]) for r in rows] == [
@@ -189,9 +238,22 @@ def test_study_predicts_first_and_modified_robots_from_the_5x5_map(store, tmp_pa
 def test_study_with_the_walked_rule_walks_the_candidates(store, tmp_path, capsys):
     uri, _, _ = store
     code = main(
-        ["hexapod", "study", GRID, "--modified", "walked", "--first", "best", "--seconds",
-         "1", "--repeats", "1", "--tracking-uri", uri]
-    )  # fmt: skip
+        [
+            "hexapod",
+            "study",
+            GRID,
+            "--modified",
+            "walked",
+            "--first",
+            "best",
+            "--seconds",
+            "1",
+            "--repeats",
+            "1",
+            "--tracking-uri",
+            uri,
+        ]
+    )
     assert code == 0
     printed = capsys.readouterr().out
     assert printed.count("candidate cell") == 2  # the two filled neighbours, walked on flat
@@ -202,9 +264,8 @@ def test_study_refuses_more_draws_than_trials_before_walking(store, tmp_path, ca
     uri, _, _ = store
     out = tmp_path / "none"
     code = main(
-        ["hexapod", "study", GRID, "--trials-drawn", "2", "--out", str(out), "--tracking-uri",
-         uri]
-    )  # fmt: skip
+        ["hexapod", "study", GRID, "--trials-drawn", "2", "--out", str(out), "--tracking-uri", uri]
+    )
     assert code == 2
     err = capsys.readouterr()
     assert "--trials-drawn 2 is invalid for MAP-LIS: allowed 1..1" in err.err

@@ -68,9 +68,16 @@ def test_a_walking_trial_walks_on_two_nodes_and_resumes_after_losing_one(
     grid_id = Grid.from_config(config.load(cfg)).grid_id
     uri = cluster.tracking_uri
     grid = linkevo(
-        "grid", str(cfg), "--address", cluster.address, "--tracking-uri", uri, "--no-progress",
-        env=cluster.env, cwd=tmp_path,
-    )  # fmt: skip
+        "grid",
+        str(cfg),
+        "--address",
+        cluster.address,
+        "--tracking-uri",
+        uri,
+        "--no-progress",
+        env=cluster.env,
+        cwd=tmp_path,
+    )
     client = MlflowClient(uri)
     deadline = time.monotonic() + 240
     victim = None
@@ -116,9 +123,16 @@ def test_a_grid_survives_a_stopped_worker_node_and_reads_back_through_the_server
     grid_id = Grid.from_config(config.load(cfg)).grid_id
     uri = cluster.tracking_uri
     grid = linkevo(
-        "grid", str(cfg), "--address", cluster.address, "--tracking-uri", uri, "--no-progress",
-        env=cluster.env, cwd=tmp_path,
-    )  # fmt: skip
+        "grid",
+        str(cfg),
+        "--address",
+        cluster.address,
+        "--tracking-uri",
+        uri,
+        "--no-progress",
+        env=cluster.env,
+        cwd=tmp_path,
+    )
     victim = cluster.workers[0]
     deadline = time.monotonic() + 240
     key = None
@@ -144,21 +158,35 @@ def test_a_grid_survives_a_stopped_worker_node_and_reads_back_through_the_server
         got = client.download_artifacts(run_id, "best_linkage.json", str(tmp_path))
         assert len(json.loads(Path(got).read_text())["genome"]) == 56
     mine = {run_id for runs in by_key.values() for run_id, _ in runs}
-    stored = [p for p in Path(cluster.dir, "artifacts").rglob("best_linkage.json")
-              if mine & set(p.parts)]  # fmt: skip
+    stored = [
+        p for p in Path(cluster.dir, "artifacts").rglob("best_linkage.json") if mine & set(p.parts)
+    ]
     assert len(stored) == 4  # proxied: the server wrote them, into its artefact folder
 
     report = linkevo(
-        "report", grid_id, "--tracking-uri", uri, "--out", str(tmp_path / "report"),
-        env=cluster.env, cwd=tmp_path,
-    )  # fmt: skip
+        "report",
+        grid_id,
+        "--tracking-uri",
+        uri,
+        "--out",
+        str(tmp_path / "report"),
+        env=cluster.env,
+        cwd=tmp_path,
+    )
     out, _ = report.communicate(timeout=300)
     assert report.returncode == 0, out
     assert (tmp_path / "report" / "report.html").stat().st_size > 10_000
     pull = linkevo(
-        "pull", grid_id, "--best", "--tracking-uri", uri, "--out", str(tmp_path / "pulled"),
-        env=cluster.env, cwd=tmp_path,
-    )  # fmt: skip
+        "pull",
+        grid_id,
+        "--best",
+        "--tracking-uri",
+        uri,
+        "--out",
+        str(tmp_path / "pulled"),
+        env=cluster.env,
+        cwd=tmp_path,
+    )
     out, _ = pull.communicate(timeout=120)
     assert pull.returncode == 0, out
     assert len(json.loads((tmp_path / "pulled" / "linkage.json").read_text())["genome"]) == 56

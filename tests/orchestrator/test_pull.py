@@ -66,9 +66,17 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
     assert main(["pull", runs[0], "--tracking-uri", uri, "--out", str(out), "--gif"]) == 0
     names = sorted(p.name for p in out.iterdir())
     assert names == sorted(
-        ["linkage.json", "linkage.png", "linkage.gif", "build_sheet.md", "build_sheet.csv",
-         "path_overlay.png", "layers.png", "template.pdf"]
-    )  # fmt: skip
+        [
+            "linkage.json",
+            "linkage.png",
+            "linkage.gif",
+            "build_sheet.md",
+            "build_sheet.csv",
+            "path_overlay.png",
+            "layers.png",
+            "template.pdf",
+        ]
+    )
     rows = list(csv.DictReader((out / "build_sheet.csv").open()))
     doc = to_document(genomes[valid[0]])
     lego = json.loads((out / "linkage.json").read_text())["lego"]
@@ -101,9 +109,17 @@ def test_pull_a_cell_by_its_bin_coordinates_and_list_the_cells(store, tmp_path, 
     assert main(["pull", runs[0], "--list", "--tracking-uri", uri]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split() == [
-        "cell", "bins", "loss", "turns", "width", "height", "min_transmission_deg", "toggles",
-        "max_stretch", "buildable",
-    ]  # fmt: skip
+        "cell",
+        "bins",
+        "loss",
+        "turns",
+        "width",
+        "height",
+        "min_transmission_deg",
+        "toggles",
+        "max_stretch",
+        "buildable",
+    ]
     losses = [float(line.split()[2]) for line in lines[1:3]]
     assert losses == sorted(losses) and {line.split()[0] for line in lines[1:3]} == {"17", "4242"}
     checks = physical_checks(

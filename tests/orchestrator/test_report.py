@@ -103,9 +103,11 @@ def test_best_linkages_physical_checks_match_their_genomes(grid, loaded):
     assert sorted(table.trial_key) == sorted(finished.trial_key)
     keyed = finished.set_index("trial_key")
     genomes = np.stack(
-        [from_document(json.loads(Path(keyed.best_linkage[k]).read_text()))[0]
-         for k in table.trial_key]
-    )  # fmt: skip
+        [
+            from_document(json.loads(Path(keyed.best_linkage[k]).read_text()))[0]
+            for k in table.trial_key
+        ]
+    )
     batch = decode(genomes, "paper")
     checks = physical_checks(batch, simulate(batch))
     assert table.buildable.tolist() == checks.buildable.tolist()

@@ -36,8 +36,21 @@ def test_a_linkages_meta_with_escape_sequences_is_printed_escaped(tmp_path, caps
     doc = to_document(genome, meta={"approach": f"MAP-LIS{CLEAR_SCREEN}{RETITLE}"})
     path = tmp_path / "linkage.json"
     path.write_text(json.dumps(doc))
-    code = main(["hexapod", "simulate", "--linkage", str(path), "--floor", "flat",
-                 "--seconds", "0.5", "--repeats", "1", "--no-log"])  # fmt: skip
+    code = main(
+        [
+            "hexapod",
+            "simulate",
+            "--linkage",
+            str(path),
+            "--floor",
+            "flat",
+            "--seconds",
+            "0.5",
+            "--repeats",
+            "1",
+            "--no-log",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 0, err
     assert "MAP-LIS\\x1b[2J" in out

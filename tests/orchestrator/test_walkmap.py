@@ -45,8 +45,18 @@ def lis_map(store, ray_local, tmp_path_factory) -> tuple[pd.DataFrame, str]:
     uri, runs = store
     printed = io.StringIO()
     with contextlib.redirect_stdout(printed):
-        code = main(["walkmap", runs["MAP-LIS"], "--cells", "best:4", "--seconds", SECONDS,
-                     "--tracking-uri", uri])  # fmt: skip
+        code = main(
+            [
+                "walkmap",
+                runs["MAP-LIS"],
+                "--cells",
+                "best:4",
+                "--seconds",
+                SECONDS,
+                "--tracking-uri",
+                uri,
+            ]
+        )
     assert code == 0
     return _walk_map(uri, runs["MAP-LIS"], tmp_path_factory.mktemp("lis-map")), printed.getvalue()
 
@@ -131,9 +141,14 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
         return run_in_process(work, items)
 
     after = walk_map(
-        store, store.repertoire_trial(run_id), counted, floors=("flat", "carpet"),
-        selection=Selection.parse("best:6"), resume=True, seconds=float(SECONDS),
-    ).frame  # fmt: skip
+        store,
+        store.repertoire_trial(run_id),
+        counted,
+        floors=("flat", "carpet"),
+        selection=Selection.parse("best:6"),
+        resume=True,
+        seconds=float(SECONDS),
+    ).frame
     assert len(walked_now) == 2 and not set(walked_now) & set(before["cell"])
     assert len(after) == 12
     old = after[after["cell"].isin(before["cell"])].sort_values(["floor", "cell"])
@@ -215,8 +230,18 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(
     uri, runs = store
     run_id = runs["MAP-WH"]
     linkevo = Path(sys.executable).parent / "linkevo"  # not on PATH: printed as its path
-    args = ["walkmap", run_id, "--cells", "best:30", "--seconds", "1", "--floor", "flat",
-            "--tracking-uri", uri]  # fmt: skip
+    args = [
+        "walkmap",
+        run_id,
+        "--cells",
+        "best:30",
+        "--seconds",
+        "1",
+        "--floor",
+        "flat",
+        "--tracking-uri",
+        uri,
+    ]
     # An ignored SIGINT is inherited across exec; the walk map's Ctrl-C is what is tested, so
     # the command starts with the default disposition whatever an earlier test left here.
     proc = subprocess.Popen(
@@ -235,8 +260,18 @@ def test_ctrl_c_keeps_the_walks_so_far_and_resume_completes_the_map(
     _, rest = proc.communicate(timeout=60)
     assert proc.returncode == 130
     printed = (seen + rest).decode()
-    again = [run_id, "--floor", "flat", "--cells", "best:30", "--seconds", "1",
-             "--tracking-uri", uri, "--resume"]  # fmt: skip
+    again = [
+        run_id,
+        "--floor",
+        "flat",
+        "--cells",
+        "best:30",
+        "--seconds",
+        "1",
+        "--tracking-uri",
+        uri,
+        "--resume",
+    ]
     assert f"Complete the map with:  {linkevo} walkmap {shlex.join(again)}\n" in printed, printed
     partial = _walk_map(uri, run_id, tmp_path / "partial")
     assert 1 <= len(partial) < 30
@@ -272,15 +307,17 @@ def test_a_second_walk_map_of_one_run_is_refused_and_no_row_is_lost(store, ray_l
         "--tracking-uri",
         uri,
     ]
-    proc = subprocess.Popen(first, stderr=subprocess.PIPE, stdout=subprocess.PIPE)  # fmt: skip
+    proc = subprocess.Popen(first, stderr=subprocess.PIPE, stdout=subprocess.PIPE)
     deadline = time.monotonic() + 120
     while not _holds_lease(uri, run_id):
         assert time.monotonic() < deadline and proc.poll() is None, "the first never started"
         time.sleep(0.2)
     second = subprocess.run(
         [*first[:5], "--resume", "--floor", "carpet", "--tracking-uri", uri],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     _, err = proc.communicate(timeout=300)
     assert proc.returncode == 0, err.decode()[-2000:]
     assert second.returncode == 2, second.stderr
@@ -303,11 +340,20 @@ def _holds_lease(uri: str, run_id: str) -> bool:
 def _damaged(path: Path, how: str) -> Path:
     """Writes a damaged walk map, as a bad disk, a bad edit or another program would."""
     good = pd.DataFrame(
-        {"cell": [1, 2], "floor": ["flat", "flat"], "status": ["walked", "walked"],
-         "mean_distance_cm": [10.0, 20.0], "breaks": [False, False], "reason": ["", ""],
-         "leg": ["LEGO build"] * 2, "bound_cm": [30.0, 30.0], "torque_p95_of_stall": [0.1, 0.1],
-         "pin_force_p99_n": [5.0, 5.0], "seconds": [1.0, 1.0]}
-    )  # fmt: skip
+        {
+            "cell": [1, 2],
+            "floor": ["flat", "flat"],
+            "status": ["walked", "walked"],
+            "mean_distance_cm": [10.0, 20.0],
+            "breaks": [False, False],
+            "reason": ["", ""],
+            "leg": ["LEGO build"] * 2,
+            "bound_cm": [30.0, 30.0],
+            "torque_p95_of_stall": [0.1, 0.1],
+            "pin_force_p99_n": [5.0, 5.0],
+            "seconds": [1.0, 1.0],
+        }
+    )
     if how == "empty":
         path.write_bytes(b"")
     elif how == "truncated":
@@ -386,9 +432,18 @@ def test_a_walking_grid_starts_from_a_walked_repertoire(store, lis_map, tmp_path
     usable = walked[walked["status"] == "walked"].groupby("cell")["floor"].nunique()
     seeded_cells = set(usable[usable == 2].index)
     assert seeded_cells  # the map walked some cells on both floors
-    grid = tiny_grid(tmp_path, approaches=["MAP-LIS"], fitnesses=["Fw"], trials=1, walks=6,
-                     walk_batch=8, evaluators_per_trial=0, trial_cpus=1,
-                     seed_from=runs["MAP-LIS"], tracking_uri=uri)  # fmt: skip
+    grid = tiny_grid(
+        tmp_path,
+        approaches=["MAP-LIS"],
+        fitnesses=["Fw"],
+        trials=1,
+        walks=6,
+        walk_batch=8,
+        evaluators_per_trial=0,
+        trial_cpus=1,
+        seed_from=runs["MAP-LIS"],
+        tracking_uri=uri,
+    )
     result = launch(grid, progress=False)
     assert not result.failed
     run_id = result.outcomes[0].run_id
@@ -406,8 +461,15 @@ def test_a_walking_grid_starts_from_a_walked_repertoire(store, lis_map, tmp_path
         (runs["EA"], "a MAP-Elites trial with a walk map", uri),
         (bare["MAP-ST"], "without walkmap.parquet", bare_uri),
     ):
-        again = tiny_grid(tmp_path, approaches=["MAP-LIS"], fitnesses=["Fw"], trials=1,
-                          walks=6, seed_from=seed_from, tracking_uri=where)  # fmt: skip
+        again = tiny_grid(
+            tmp_path,
+            approaches=["MAP-LIS"],
+            fitnesses=["Fw"],
+            trials=1,
+            walks=6,
+            seed_from=seed_from,
+            tracking_uri=where,
+        )
         with pytest.raises(ConfigError, match=message):
             launch(again, progress=False)
 
@@ -423,8 +485,17 @@ def test_a_walk_map_keeps_its_robot_and_refuses_to_resume_on_another(
     shipped = (Path(__file__).parents[2] / "configs" / "hexapod.toml").read_text()
     heavy.write_text(shipped.replace("frame_mass_kg = 1.1", "frame_mass_kg = 2.5"))
     before = _walk_map(uri, run_id, tmp_path / "before")
-    argv = ["walkmap", run_id, "--cells", "best:6", "--resume", "--config", str(heavy),
-            "--tracking-uri", uri]  # fmt: skip
+    argv = [
+        "walkmap",
+        run_id,
+        "--cells",
+        "best:6",
+        "--resume",
+        "--config",
+        str(heavy),
+        "--tracking-uri",
+        uri,
+    ]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert 'its walk map walked a robot with physics {}, this one has {"frame_mass_kg": 2.5}' in err

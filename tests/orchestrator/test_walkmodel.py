@@ -48,11 +48,23 @@ def fitted(store, ray_local) -> dict:
     on MAP-LIS's with MAP-WH's held out: what `walkmodel fit --json` printed."""
     uri, runs = store
     for approach, cells in (("MAP-LIS", "best:150"), ("MAP-WH", "best:40")):
-        code, _ = run("walkmap", runs[approach], "--cells", cells, "--seconds", "2",
-                      "--tracking-uri", uri)  # fmt: skip
+        code, _ = run(
+            "walkmap", runs[approach], "--cells", cells, "--seconds", "2", "--tracking-uri", uri
+        )
         assert code == 0
-    code, printed = run("walkmodel", "fit", runs["MAP-LIS"], runs["MAP-WH"], "--holdout", "0.5",
-                        "--seed", "1", "--json", "--tracking-uri", uri)  # fmt: skip
+    code, printed = run(
+        "walkmodel",
+        "fit",
+        runs["MAP-LIS"],
+        runs["MAP-WH"],
+        "--holdout",
+        "0.5",
+        "--seed",
+        "1",
+        "--json",
+        "--tracking-uri",
+        uri,
+    )
     assert code == 0
     return json.loads(printed)
 
@@ -129,8 +141,20 @@ def test_the_explorer_and_pull_mark_predicted_walks_as_predicted(store, fitted, 
 
 def test_a_model_is_found_by_its_run_and_bad_references_are_refused(store, fitted, capsys):
     uri, runs = store
-    assert main(["walkmodel", "predict", runs["MAP-ST"], "--model", runs["MAP-LIS"],
-                 "--tracking-uri", uri]) == 2  # fmt: skip
+    assert (
+        main(
+            [
+                "walkmodel",
+                "predict",
+                runs["MAP-ST"],
+                "--model",
+                runs["MAP-LIS"],
+                "--tracking-uri",
+                uri,
+            ]
+        )
+        == 2
+    )
     assert "is not a walk model" in capsys.readouterr().err
     assert main(["walkmodel", "fit", runs["MAP-ST"], "--tracking-uri", uri]) == 2
     assert "has no walk map to learn from" in capsys.readouterr().err

@@ -104,8 +104,9 @@ def test_the_walk_breaks_a_frail_leg_and_reports_its_figures():
     assert walked.breaks and "frail: the foot gives" in walked.reason
     assert walked.distance_m > 0.01  # it walks, rigid; the real leg would fold
     sound = json.loads((ROOT / "tests" / "data" / "sound_leg.json").read_text())
-    walked = walk(leg_from_genome(*from_document(sound)), FLOORS["flat"],
-                  settings=WalkSettings(seconds=1.0))  # fmt: skip
+    walked = walk(
+        leg_from_genome(*from_document(sound)), FLOORS["flat"], settings=WalkSettings(seconds=1.0)
+    )
     assert walked.frailty is not None and not walked.frailty.frail and not walked.breaks
     expected = frailty(leg_from_genome(*from_document(sound)), walked.pin_force_n[2])
     assert walked.frailty == expected

@@ -94,8 +94,10 @@ def test_no_two_beams_on_one_layer_cross_at_any_sampled_angle():
                     assert plan.layer[a] != plan.layer[b]
                 continue
             (s1, e1), (s2, e2) = ends[a], ends[b]
-            if any(segments_cross(pos[s1, k], pos[e1, k], pos[s2, k], pos[e2, k])
-                   for k in range(pos.shape[1])):  # fmt: skip
+            if any(
+                segments_cross(pos[s1, k], pos[e1, k], pos[s2, k], pos[e2, k])
+                for k in range(pos.shape[1])
+            ):
                 crossing.add((a, b))
                 assert plan.layer[a] != plan.layer[b], (i, a, b)
         assert crossing == {tuple(p) for p in crossing_pairs(batch, motion, int(i)).tolist()}

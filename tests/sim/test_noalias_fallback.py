@@ -50,8 +50,12 @@ def test_kernels_compiled_without_noalias_give_the_same_outputs(tmp_path):
     }
     done = subprocess.run(
         [sys.executable, "-c", SCRIPT, str(tmp_path / "genomes.npy"), str(tmp_path / "out.npz")],
-        env=env, capture_output=True, text=True, timeout=600, check=False,
-    )  # fmt: skip
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     fallback = np.load(tmp_path / "out.npz")
     want = sim.evaluate(genomes, "Fp", "paper").arrays()

@@ -189,8 +189,9 @@ def test_linkevo_sim_walks_a_robot_from_a_document_as_a_notebook_would():
     from linkevo.sim import walk as walk_fn
 
     assert not any(isinstance(getattr(sim, name), types.ModuleType) for name in sim.__all__)
-    result = walk_fn(leg_from_genome(*from_document(doc)), FLOORS["flat"],
-                     settings=WalkSettings(seconds=1.0))  # fmt: skip
+    result = walk_fn(
+        leg_from_genome(*from_document(doc)), FLOORS["flat"], settings=WalkSettings(seconds=1.0)
+    )
     assert result.distance_m > 0.01 and not result.breaks
 
 

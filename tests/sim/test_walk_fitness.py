@@ -19,12 +19,12 @@ from linkevo.sim.robot.walk_fitness import (
     BROKEN_LOSS,
     NO_LEG_LOSS,
     REJECTED_LOSS,
-    WALK_ORDER,
     floor_losses,
     rejected_loss,
     walk_candidate,
 )
 from linkevo.sim.robot.walk_map import CellBatch, walk_cells, walk_map_settings
+from linkevo.sim.robot.walk_rows import WALK_ORDER
 from linkevo.sim.robot.walking import walk
 from tests.helpers.walking import crank_leg
 
@@ -39,8 +39,14 @@ def genome() -> np.ndarray:
 
 
 def row(status="walked", distance=50.0, breaks=False, bound=100.0, floor="flat") -> dict:
-    return {"floor": floor, "status": status, "mean_distance_cm": distance, "breaks": breaks,
-            "bound_cm": bound, "seconds": 10.0}  # fmt: skip
+    return {
+        "floor": floor,
+        "status": status,
+        "mean_distance_cm": distance,
+        "breaks": breaks,
+        "bound_cm": bound,
+        "seconds": 10.0,
+    }
 
 
 def test_a_walk_stopped_at_its_break_breaks_as_the_whole_walk_does():
@@ -84,11 +90,15 @@ def test_the_floors_losses_fall_in_their_tiers():
     assert floor_losses("walked", both).tolist() == [-80.0, -60.0]
     beyond = {"flat": row(distance=150.0, bound=120.0), "carpet": row(floor="carpet")}
     assert floor_losses("walked", beyond)[0] == -120.0  # credited at most its bound
-    broke = {"carpet": row(distance=20.0, breaks=True, floor="carpet"),
-             "flat": row(status="not walked", distance=math.nan, breaks=True)}  # fmt: skip
+    broke = {
+        "carpet": row(distance=20.0, breaks=True, floor="carpet"),
+        "flat": row(status="not walked", distance=math.nan, breaks=True),
+    }
     assert floor_losses("walked", broke).tolist() == [BROKEN_LOSS - 20.0] * 2
-    diverged = {"carpet": row(distance=math.nan, breaks=True, floor="carpet"),
-                "flat": row(status="not walked", distance=math.nan, breaks=True)}  # fmt: skip
+    diverged = {
+        "carpet": row(distance=math.nan, breaks=True, floor="carpet"),
+        "flat": row(status="not walked", distance=math.nan, breaks=True),
+    }
     assert floor_losses("walked", diverged).tolist() == [BROKEN_LOSS] * 2
     for stage in ("no_lego_build", "no_turn", "failed"):
         assert floor_losses(stage, {}).tolist() == [NO_LEG_LOSS] * 2
@@ -107,16 +117,30 @@ def test_the_floors_losses_fall_in_their_tiers():
 def test_caveats_name_what_a_builder_should_doubt():
     from dataclasses import replace
 
-    from linkevo.sim.robot.walk_figures import caveats
+    from linkevo.sim.robot.field_summary import caveats
     from linkevo.sim.robot.walking import Walk
 
     plain = Walk(
-        distance_m=0.5, bound_m=1.0, heading_drift_deg=0.0, body_height_m=0.1, clearance_m=0.05,
-        max_pitch_deg=5.0, max_roll_deg=2.0, foot_slip_mm_s=1.0, torque_p95=0.3, torque_max=0.5,
-        saturated=np.zeros(6), max_lag_deg=3.0, pin_force_n=(1.0, 2.0, 3.0, 4.0),
-        loop_error_mm=0.01, frame_contact=0.0, breaks=False, reason="", trace={},
+        distance_m=0.5,
+        bound_m=1.0,
+        heading_drift_deg=0.0,
+        body_height_m=0.1,
+        clearance_m=0.05,
+        max_pitch_deg=5.0,
+        max_roll_deg=2.0,
+        foot_slip_mm_s=1.0,
+        torque_p95=0.3,
+        torque_max=0.5,
+        saturated=np.zeros(6),
+        max_lag_deg=3.0,
+        pin_force_n=(1.0, 2.0, 3.0, 4.0),
+        loop_error_mm=0.01,
+        frame_contact=0.0,
+        breaks=False,
+        reason="",
+        trace={},
         foot_deviation_mm=0.1,
-    )  # fmt: skip
+    )
     assert caveats([plain]) == []
     far = replace(plain, distance_m=1.5)
     assert "1 of 2 walks go beyond the level-body bound (100 cm)" in caveats([plain, far])[0]

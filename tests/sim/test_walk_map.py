@@ -11,7 +11,8 @@ from linkevo.sim.linkage.evaluating import evaluate
 from linkevo.sim.linkage.genome import random_genomes
 from linkevo.sim.robot.hexapod import FLOORS
 from linkevo.sim.robot.leg import LegError, leg_from_genome
-from linkevo.sim.robot.walk_map import COLUMNS, CellBatch, build_cells, group_legs, walk_cells
+from linkevo.sim.robot.walk_map import CellBatch, build_cells, group_legs, walk_cells
+from linkevo.sim.robot.walk_rows import COLUMNS
 from linkevo.sim.robot.walking import WalkSettings, field_trials
 
 SECONDS = 4.0
@@ -78,8 +79,13 @@ def test_cells_that_build_the_same_leg_share_one_walk():
     genome = built_genomes(1)[0]
     nudged = genome + 1e-9  # the same whole-module rounding, another genome
     other = built_genomes(2)[1]
-    batch = CellBatch(np.array([3, 4, 5]), np.vstack([genome, nudged, other]), "paper",
-                      ("flat", "carpet"), seconds=1.0)  # fmt: skip
+    batch = CellBatch(
+        np.array([3, 4, 5]),
+        np.vstack([genome, nudged, other]),
+        "paper",
+        ("flat", "carpet"),
+        seconds=1.0,
+    )
     legs = group_legs(build_cells(batch))
     assert sorted(sorted(leg.cells) for leg in legs) == [[3, 4], [5]]
     rows = walk_cells(batch)

@@ -86,8 +86,15 @@ def test_a_path_is_drawn_with_gaps_where_its_linkage_fails():
     angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
     x, y = np.cos(angles), 0.5 * np.sin(angles)
     x[10:25] = np.nan  # the linkage fails over 15 of its 40 angles
-    chosen = pd.DataFrame({"foot_x": [x, np.cos(angles)], "foot_y": [y, np.sin(angles)],
-                           "row": [0, 0], "col": [0, 1], "loss": [1.0, 2.0]})  # fmt: skip
+    chosen = pd.DataFrame(
+        {
+            "foot_x": [x, np.cos(angles)],
+            "foot_y": [y, np.sin(angles)],
+            "row": [0, 0],
+            "col": [0, 1],
+            "loss": [1.0, 2.0],
+        }
+    )
     lines = draw_paths(Figure().add_subplot(), chosen, (1, 2), Normalize(0, 3))
     segments = lines.get_segments()
     assert len(segments) == 2  # the failing path one open run, the whole one closed

@@ -96,8 +96,13 @@ def test_trial_writes_every_artefact(approach: str, tmp_path: Path) -> None:
     rows = read_rows(tmp_path / "metrics.csv")
     header = rows[0]
     assert header[:6] == [
-        "iteration", "evaluations", "best_loss", "mean_loss", "coverage", "qd_score"
-    ]  # fmt: skip
+        "iteration",
+        "evaluations",
+        "best_loss",
+        "mean_loss",
+        "coverage",
+        "qd_score",
+    ]
     assert ("hypervolume" in header) == (approach == "NSGA2")
     assert [float(r[1]) for r in rows[1:]] == [BATCH * i for i in range(1, 7)]
     best = [float(r[2]) for r in rows[1:]]
@@ -202,8 +207,12 @@ def test_a_partial_row_after_the_checkpoint_is_dropped_on_resume(
     spec = spec_for("EA", evaluations=7 * BATCH)
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "whole")
     with pytest.raises(RuntimeError, match="evaluator crashed"):
-        run_trial(spec, crashing_evaluator(evaluator_for(spec), fail_at=6), NullRecorder(),
-                  tmp_path / "cut")  # fmt: skip
+        run_trial(
+            spec,
+            crashing_evaluator(evaluator_for(spec), fail_at=6),
+            NullRecorder(),
+            tmp_path / "cut",
+        )
     metrics = tmp_path / "cut" / "metrics.csv"
     metrics.write_text(metrics.read_text() + "6.0,600.0,12.3")
     run_trial(spec, evaluator_for(spec), NullRecorder(), tmp_path / "cut", resume=True)

@@ -26,25 +26,51 @@ from linkevo.workers.walk_evaluator import WalkingEvaluator
 def linkevo(*args: str, cwd: Path) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "linkevo.orchestrator", *args],
-        cwd=cwd, capture_output=True, text=True, timeout=600, env={**os.environ},
-    )  # fmt: skip
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ},
+    )
 
 
 def test_a_map_lis_walking_trial_walks_what_its_loss_claims(tmp_path):
     out = tmp_path / "cli"
-    done = linkevo("trial", "--approach", "MAP-LIS", "--fitness", "Fw", "--walks", "120",
-                   "--seed", "1", "--out", str(out), "--no-progress", cwd=tmp_path)  # fmt: skip
+    done = linkevo(
+        "trial",
+        "--approach",
+        "MAP-LIS",
+        "--fitness",
+        "Fw",
+        "--walks",
+        "120",
+        "--seed",
+        "1",
+        "--out",
+        str(out),
+        "--no-progress",
+        cwd=tmp_path,
+    )
     assert done.returncode == 0, done.stderr
     assert "walks (" in done.stdout
     metrics = pd.read_csv(out / "metrics.csv")
     assert metrics["walks"].iloc[-1] >= 120 and metrics["walks"].iloc[-2] < 120
-    assert {"walk_cache_hits", "rejected_2d", "rejected_build", "walkers", "best_flat_cm",
-            "best_carpet_cm"} <= set(metrics.columns)  # fmt: skip
+    assert {
+        "walk_cache_hits",
+        "rejected_2d",
+        "rejected_build",
+        "walkers",
+        "best_flat_cm",
+        "best_carpet_cm",
+    } <= set(metrics.columns)
     assert metrics["rejected_2d"].iloc[-1] > 0  # rejections cost no walk
 
-    again = run_trial(TrialSpec.walking("MAP-LIS", 120, seed=1),
-                      make_evaluator(TrialSpec.walking("MAP-LIS", 120, seed=1)),
-                      NullRecorder(), tmp_path / "again")  # fmt: skip
+    again = run_trial(
+        TrialSpec.walking("MAP-LIS", 120, seed=1),
+        make_evaluator(TrialSpec.walking("MAP-LIS", 120, seed=1)),
+        NullRecorder(),
+        tmp_path / "again",
+    )
     assert (again.out_dir / "metrics.csv").read_text() == (out / "metrics.csv").read_text()
 
     claimed = -json.loads((out / "result.json").read_text())["best_loss"]
@@ -55,8 +81,17 @@ def test_a_map_lis_walking_trial_walks_what_its_loss_claims(tmp_path):
     walked = pd.read_parquet(out / "walkmap.parquet")
     assert {"cell", "floor", "status", "mean_distance_cm", "bin_0", "bin_1"} <= set(walked)
     for floor in ("flat", "carpet"):
-        done = linkevo("hexapod", "simulate", "--linkage", str(out / "best_linkage.json"),
-                       "--floor", floor, "--json", "--no-log", cwd=tmp_path)  # fmt: skip
+        done = linkevo(
+            "hexapod",
+            "simulate",
+            "--linkage",
+            str(out / "best_linkage.json"),
+            "--floor",
+            floor,
+            "--json",
+            "--no-log",
+            cwd=tmp_path,
+        )
         assert done.returncode == 0, done.stderr
         table_one = json.loads(done.stdout)
         assert not table_one["breaks"]
@@ -165,10 +200,21 @@ def test_a_walking_trial_is_refused_as_specified(make, message):
 
 
 def test_the_command_refuses_a_walking_trial_without_its_budget(tmp_path):
-    done = linkevo("trial", "--approach", "EA", "--fitness", "Fw", "--out", str(tmp_path / "t"),
-                   cwd=tmp_path)  # fmt: skip
+    done = linkevo(
+        "trial", "--approach", "EA", "--fitness", "Fw", "--out", str(tmp_path / "t"), cwd=tmp_path
+    )
     assert done.returncode == 2 and "--fitness Fw needs --walks N" in done.stderr
-    done = linkevo("trial", "--approach", "EA", "--fitness", "Fp", "--walks", "5",
-                   "--out", str(tmp_path / "t"), cwd=tmp_path)  # fmt: skip
+    done = linkevo(
+        "trial",
+        "--approach",
+        "EA",
+        "--fitness",
+        "Fp",
+        "--walks",
+        "5",
+        "--out",
+        str(tmp_path / "t"),
+        cwd=tmp_path,
+    )
     assert done.returncode == 2 and "--walks is for --fitness Fw only" in done.stderr
     assert not (tmp_path / "t" / "metrics.csv").exists()

@@ -82,14 +82,31 @@ def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> N
             ax.plot(*np.stack([a, b]).T * scale, "-", color="0.85", lw=1, zorder=1)
             continue
         colour = LAYER_COLOURS[layer % len(LAYER_COLOURS)]
-        ax.add_patch(Polygon(beam_outline(a, b, scale), closed=True, fc=colour, ec="k",
-                             lw=0.4, alpha=0.45, zorder=2 + layer))  # fmt: skip
+        ax.add_patch(
+            Polygon(
+                beam_outline(a, b, scale),
+                closed=True,
+                fc=colour,
+                ec="k",
+                lw=0.4,
+                alpha=0.45,
+                zorder=2 + layer,
+            )
+        )
         for hole in beam_holes(a, b, int(modules)):
-            ax.add_patch(Circle(hole * scale, HOLE_RADIUS * scale, fc="white", ec="k", lw=0.3,
-                                zorder=20))  # fmt: skip
+            ax.add_patch(
+                Circle(hole * scale, HOLE_RADIUS * scale, fc="white", ec="k", lw=0.3, zorder=20)
+            )
         middle = (a + b) / 2 * scale
-        ax.text(*middle, f"b{beam['id']} L{layer}", fontsize=5, ha="center", va="center",
-                zorder=30, bbox=LABEL_BOX)  # fmt: skip
+        ax.text(
+            *middle,
+            f"b{beam['id']} L{layer}",
+            fontsize=5,
+            ha="center",
+            va="center",
+            zorder=30,
+            bbox=LABEL_BOX,
+        )
     for node in doc["nodes"]:
         where = nodes[node["id"]] * scale
         if not np.isfinite(where).all():
@@ -97,8 +114,9 @@ def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> N
         if node["kind"] in ("motor", "static"):
             marker = "+" if node["kind"] == "motor" else "s"
             ax.plot(*where, marker, color="k", ms=8 if marker == "+" else 4, mew=1.2, zorder=31)
-        ax.annotate(str(node["id"]), where, xytext=(3, 3), textcoords="offset points",
-                    fontsize=5, zorder=31)  # fmt: skip
+        ax.annotate(
+            str(node["id"]), where, xytext=(3, 3), textcoords="offset points", fontsize=5, zorder=31
+        )
 
 
 def _bounds(doc: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -123,8 +141,11 @@ def draw_layers(doc: dict, path: Path) -> Path:
     for layer in range(n_layers):
         ax = fig.add_subplot(rows, columns, layer + 1)
         _draw_build(ax, doc, 1.0, only_layer=layer)
-        beams = [f"b{b['id']}" for b, lay in zip(doc["beams"], doc["lego"]["layers"],
-                                                  strict=True) if lay == layer]  # fmt: skip
+        beams = [
+            f"b{b['id']}"
+            for b, lay in zip(doc["beams"], doc["lego"]["layers"], strict=True)
+            if lay == layer
+        ]
         ax.set_title(f"layer {layer}: {', '.join(beams)}", fontsize=8)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])

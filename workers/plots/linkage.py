@@ -74,12 +74,21 @@ def _figure(batch, motion, k: int, title: str, numbered: bool):
         s, e = batch.beam_start[0, b], batch.beam_end[0, b]
         ax.plot(*zip(pos[s, k], pos[e, k], strict=True), "-", color="0.25", lw=2.5, zorder=2)
         if numbered:  # beam numbers as on the build sheet
-            ax.text(*(pos[s, k] + pos[e, k]) / 2, f"b{b}", fontsize=6, color="tab:green",
-                    ha="center", va="center", bbox=LABEL_BOX, zorder=6)  # fmt: skip
+            ax.text(
+                *(pos[s, k] + pos[e, k]) / 2,
+                f"b{b}",
+                fontsize=6,
+                color="tab:green",
+                ha="center",
+                va="center",
+                bbox=LABEL_BOX,
+                zorder=6,
+            )
     for j in range(pos.shape[0]) if numbered else ():  # node numbers
         if np.isfinite(pos[j, k, 0]):
-            ax.annotate(str(j), pos[j, k], xytext=(4, 4), textcoords="offset points",
-                        fontsize=7, zorder=6)  # fmt: skip
+            ax.annotate(
+                str(j), pos[j, k], xytext=(4, 4), textcoords="offset points", fontsize=7, zorder=6
+            )
     kinds = batch.node_kind[0]
     moving = kinds >= 2
     ax.scatter(*pos[moving, k].T, s=40, c="white", edgecolors="k", zorder=3, label="moving node")

@@ -169,9 +169,14 @@ def write_gif(frames: list[np.ndarray], path: Path, fps: float = 15.0) -> Path:
     images = [Image.fromarray(f).quantize(colors=96, method=palette) for f in frames]
     with atomic_path(path) as tmp:
         images[0].save(
-            tmp, format="GIF", save_all=True, append_images=images[1:],
-            duration=round(1000 / fps), loop=0, optimize=True,
-        )  # fmt: skip
+            tmp,
+            format="GIF",
+            save_all=True,
+            append_images=images[1:],
+            duration=round(1000 / fps),
+            loop=0,
+            optimize=True,
+        )
     return path
 
 

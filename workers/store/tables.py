@@ -8,7 +8,7 @@ A repertoire has a row per filled cell: cell (int64, -1 outside an archive), los
 angle_error, desc_0..desc_{D-1}, bin_0..bin_{D-1} (archives), genome (56 genes), sigma,
 foot_x and foot_y (A crank angles, NaN at failed ones), plus an approach's extras
 (`algorithms.optimizer.BaseOptimizer.view`). A walk map has a row per cell and floor:
-`sim.robot.walk_map.COLUMNS` and the cell's bins.
+`sim.robot.walk_rows.COLUMNS` and the cell's bins.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ import pandas as pd
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.linkage.genome import N_GENES
-from linkevo.sim.robot.hexapod import FLOORS
+from linkevo.sim.robot.walk_rows import COLUMNS as WALK_MAP_COLUMNS
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER, STATUSES, Status
 
 REPERTOIRE_COLUMNS: tuple[str, ...] = ("cell", "loss", "genome")
 """The columns every reader of a repertoire or population needs (with its bins)."""
@@ -144,7 +145,7 @@ def _check_cell_floor_rows(frame: pd.DataFrame, columns, fail) -> None:
         raise fail(f"lacks the column(s) {', '.join(missing)}")
     if frame["cell"].to_numpy().dtype.kind != "i":
         raise fail("has cells that are not integers")
-    unknown = sorted(set(frame["floor"]) - set(FLOORS))
+    unknown = sorted(set(frame["floor"]) - set(FLOOR_ORDER))
     if unknown:
         raise fail(f"has unknown floors: {', '.join(map(repr, unknown))}")
     if frame.duplicated(["cell", "floor"]).any():
@@ -160,8 +161,6 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
             (cell, floor) pair twice, or a sound walk (walked, not breaking) without a
             finite distance.
     """
-    from linkevo.sim.robot.walk_map import COLUMNS as WALK_MAP_COLUMNS
-    from linkevo.sim.robot.walk_map import STATUSES
     from linkevo.workers.store.run_layout import WALK_MAP
 
     remedy = (
@@ -182,7 +181,7 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
         raise fail("has a breaks column that is not true or false")
     frame = frame.assign(breaks=breaks.astype(bool))
     distance = pd.to_numeric(frame["mean_distance_cm"], errors="coerce").to_numpy(dtype=float)
-    sound = (frame["status"] == "walked").to_numpy() & ~frame["breaks"].to_numpy()
+    sound = (frame["status"] == Status.WALKED).to_numpy() & ~frame["breaks"].to_numpy()
     if not np.isfinite(distance[sound]).all():
         raise fail("has walks that do not break but have no finite distance")
     return frame.assign(mean_distance_cm=distance)

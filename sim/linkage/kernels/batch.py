@@ -1,5 +1,8 @@
 """Provides the batch entry points (`prange` over chunks of a batch): decode, simulate, evaluate;
 `sim.linkage.decoding`, `sim.linkage.kinematics` and `sim.linkage.evaluating` are their numpy faces.
+
+The kernels' argument lists of 15-30 arrays are laid out by hand (ruff told to skip them): one
+argument per line, as ruff would lay them out, spreads each call over a screen.
 """
 
 from __future__ import annotations

@@ -1,5 +1,8 @@
 """Provides the kernels that decode one linkage and place its nodes at every crank angle
 (spec §3-§4): the motor, statics, crank, extensions and triangles.
+
+The kernels' argument lists of 15-30 arrays are laid out by hand (ruff told to skip them): one
+argument per line, as ruff would lay them out, spreads each call over a screen.
 """
 
 from __future__ import annotations
@@ -159,9 +162,17 @@ def place_fixed_triangle(new, ni, nf, legacy, xs, ys, ok):
     c = ni[new, 2]
     side = 1.0 if ni[new, 3] == 0 else -1.0
     x, y, good = triangle_point(
-        xs[a, 0], ys[a, 0], xs[c, 0], ys[c, 0], nf[new, 0], nf[new, 1], side,
-        nf[new, 3], nf[new, 4], legacy,
-    )  # fmt: skip
+        xs[a, 0],
+        ys[a, 0],
+        xs[c, 0],
+        ys[c, 0],
+        nf[new, 0],
+        nf[new, 1],
+        side,
+        nf[new, 3],
+        nf[new, 4],
+        legacy,
+    )
     fill_row(new, x, y, xs, ys)
     if not good:
         ok[:] = False

@@ -17,6 +17,9 @@ a rounding turns over the whole turn with rigid beams and keeps the foot node. T
 `quantise`'s choice unless its answer lies beyond the `keep` closest foot paths, moves the
 foot to another node, or ties with another in floating point (0.5-6 % of study linkages);
 a linkage with no rounding found gets -1.
+
+The kernels' argument lists of 15-30 arrays are laid out by hand (ruff told to skip them): one
+argument per line, as ruff would lay them out, spreads each call over a screen.
 """
 
 from __future__ import annotations
@@ -140,8 +143,9 @@ def _search(nodes, count, nb1, nb2, lo, hi, ni, nf, bi, legacy, cos_t, sin_t, xs
         j = nodes[level]
         _choose(j, choice[level], nb1, nb2, lo, hi, lengths)
         _set_lengths(j, lengths[nb1[j]], lengths[nb2[j]] if nb2[j] >= 0 else 0.0, ni, nf)
-        good = _place(j, nb1[j], nb2[j], ni, nf, bi, legacy, cos_t, sin_t, xs, ys, ux, uy,
-                      ok, lengths)  # fmt: skip
+        good = _place(
+            j, nb1[j], nb2[j], ni, nf, bi, legacy, cos_t, sin_t, xs, ys, ux, uy, ok, lengths
+        )
         if good and not first_only and level < count - 1 and np.isfinite(best_d[-1]):
             r = reach[j]
             if r < np.inf:  # the foot is within r of node j: a lower bound of its distance
@@ -295,8 +299,9 @@ def round_batch(ni_all, nf_all, bi_all, n_beams_all, length_all, foot_all, legac
             for level in range(n_foot):  # the foot beams as ranked, placed again
                 j = foot_nodes[level]
                 _set_lengths(j, lengths[nb1[j]], lengths[nb2[j]] if nb2[j] >= 0 else 0.0, ni, nf)
-                _place(j, nb1[j], nb2[j], ni, nf, bi, legacy, cos_t, sin_t, xs, ys, ux, uy,
-                       ok, lengths)  # fmt: skip
+                _place(
+                    j, nb1[j], nb2[j], ni, nf, bi, legacy, cos_t, sin_t, xs, ys, ux, uy, ok, lengths
+                )
             if _search(other_nodes, n_other, nb1, nb2, lo, hi, ni, nf, bi, legacy, cos_t,
                        sin_t, xs, ys, ux, uy, ok, lengths, foot, ref_x_all[i], ref_y_all[i],
                        seen_all[i], best_d, best_l, True, n_beams, cos_f, sin_f, fx, fy, fux,

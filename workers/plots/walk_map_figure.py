@@ -12,6 +12,7 @@ from matplotlib.colors import ListedColormap
 from matplotlib.figure import Figure
 
 from linkevo.sim.robot.hexapod import in_floor_order
+from linkevo.sim.robot.walk_rows import Status
 from linkevo.workers.store.artifacts import atomic_path
 from linkevo.workers.store.tables import axis_names, bin_columns, fold_bins, space_of
 
@@ -32,7 +33,7 @@ def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> 
     bins = bin_columns(frame.columns)
     space = space_of(approach, len(bins))
     floors = in_floor_order(frame["floor"].unique())
-    walked = frame[frame["status"] == "walked"]
+    walked = frame[frame["status"] == Status.WALKED]
     top = walked.loc[~walked["breaks"], "mean_distance_cm"]
     high = max(float(np.nanquantile(top, 0.98)), 1.0) if top.notna().any() else 1.0
     low = min(float(np.nanquantile(top, 0.02)), 0.0) if top.notna().any() else 0.0
@@ -50,10 +51,17 @@ def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> 
         broken[rows[~ok], cols[~ok]] = 1.0
         shown = ax.imshow(distance, origin="lower", cmap=DISTANCE_CMAP, vmin=low, vmax=high)
         ax.imshow(broken, origin="lower", cmap=BROKEN, vmin=0.0, vmax=1.0)
-        beyond = int((part["mean_distance_cm"].to_numpy(dtype=float)[ok]
-                      > part["bound_cm"].to_numpy(dtype=float)[ok]).sum())  # fmt: skip
-        ax.set_title(f"{floor}: {int(ok.sum())} walk ({beyond} beyond the level-body bound), "
-                     f"{int((~ok).sum())} break (red)", fontsize=8)  # fmt: skip
+        beyond = int(
+            (
+                part["mean_distance_cm"].to_numpy(dtype=float)[ok]
+                > part["bound_cm"].to_numpy(dtype=float)[ok]
+            ).sum()
+        )
+        ax.set_title(
+            f"{floor}: {int(ok.sum())} walk ({beyond} beyond the level-body bound), "
+            f"{int((~ok).sum())} break (red)",
+            fontsize=8,
+        )
         x_axis, y_axis = axis_names(space)
         ax.set_xlabel(f"{x_axis} (bin)", fontsize=6)
         ax.set_ylabel(f"{y_axis} (bin)", fontsize=6)
