@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from linkevo.orchestrator.walkmap import Selection
+from linkevo.orchestrator.repertoire_walks import Selection
 from linkevo.sim.robot import lean_model
 from linkevo.sim.robot.hexapod import FLOORS, UNIT_M, Motor
 from linkevo.sim.robot.leg import leg_from_genome

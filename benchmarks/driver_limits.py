@@ -41,7 +41,7 @@ from mlflow.tracking import MlflowClient
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from linkevo.orchestrator import config, config_text  # noqa: E402
+from linkevo.orchestrator import config  # noqa: E402
 from linkevo.orchestrator.driver import trial_specs  # noqa: E402
 from linkevo.orchestrator.grid import Grid  # noqa: E402
 from linkevo.orchestrator.local_cluster import ClusterSettings, down, up  # noqa: E402
@@ -67,7 +67,7 @@ def grid_config(work: Path, trials_total: int) -> Path:
     cells = len(TINY["approaches"]) * len(TINY["fitnesses"])
     cfg = config.from_dict({**TINY, "trials": max(1, trials_total // cells)})
     path = work / "tiny.toml"
-    path.write_text(config_text.to_toml(cfg))
+    path.write_text(config.to_toml(cfg))
     return path
 
 

@@ -97,7 +97,7 @@ def fw_arms(store: RunStore, grid: str, tmp: Path) -> list[dict]:
         log = pd.read_parquet(store.download(run_id, layout.WALK_LOG, tmp / run_id))
         log = log[log["stage"].isin(["walked", "cached"])]
         genomes = np.stack(log["genome"].to_numpy()).astype(np.float64)
-        info = store.client.get_run(run_id).info
+        info = store.run(run_id).info
         out.append(
             {
                 "arm": run[f"tags.{layout.APPROACH}"],
@@ -127,7 +127,7 @@ def walk_map_arm(
         wide.columns = [f"{floor}_{field}" for field, floor in wide.columns]
         wide = wide[(wide["flat_status"] == "walked") | (wide["carpet_status"] == "walked")]
         genomes = np.stack(table.loc[wide.index, "genome"].to_numpy()).astype(np.float64)
-        info = store.client.get_run(run_id).info
+        info = store.run(run_id).info
         search_s = (info.end_time - info.start_time) / 1000
         out.append(
             {

@@ -63,10 +63,9 @@ def main() -> None:
         uri = resolve_tracking_uri(args.tracking_uri or (None if args.grid_id else tmp))
         grid_id = args.grid_id or run_grid(args, Path(tmp))
         store = RunStore(uri)
-        client = store.client
         (parent,) = store.grid_runs(grid_id)
         trials = store.trial_runs(grid_id)
-        config_path = client.download_artifacts(parent.info.run_id, layout.GRID_CONFIG_TOML, tmp)
+        config_path = store.download(parent.info.run_id, layout.GRID_CONFIG_TOML, Path(tmp))
         config = load(config_path)
     seconds = {r: (r.info.end_time - r.info.start_time) / 1000 for r in trials if r.info.end_time}
     wall = (parent.info.end_time - parent.info.start_time) / 1000

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import spearmanr
 
-from linkevo.orchestrator.walkmap import Selection
+from linkevo.orchestrator.repertoire_walks import Selection
 from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS
 from linkevo.sim.robot.leg import leg_from_genome
 from linkevo.sim.robot.walk_fitness import search_walk_settings

@@ -7,7 +7,7 @@ robot's trial of the paper-mode study grid, `docs/results.md`). The sample is `-
 cells of the map as `linkevo walkmap --cells all` takes them (every cell, as evolved where
 no LEGO build turns), a block of neighbouring cells from the middle of the map so that it
 holds the cells that share a LEGO build as the whole map does; it is walked on both floors
-by `orchestrator.walkmap.walk_rows` in process on one core, then on Ray with 2 workers,
+by `orchestrator.repertoire_walks.walk_rows` in process on one core, then on Ray with 2 workers,
 nothing logged. `--full` then walks every cell of the repertoire on Ray with 2 workers the
 same way and prints its time. Goal: >= 1.7x from 2 workers; a full repertoire (about 9,000
 cells x 2 floors) in <= 30 min on 2 cores.
@@ -22,7 +22,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from linkevo.orchestrator.walkmap import Selection, plan, run_in_process, run_on_ray, walk_rows
+from linkevo.orchestrator.repertoire_walks import (
+    Selection,
+    plan,
+    run_in_process,
+    run_on_ray,
+    walk_rows,
+)
 from linkevo.sim.robot.hexapod import WALK_SECONDS
 from linkevo.workers.store.runs import RunStore
 

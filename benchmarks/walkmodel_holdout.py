@@ -4,7 +4,7 @@ Run: `.venv/bin/python benchmarks/walkmodel_holdout.py --tracking-uri URI REF [R
 
 Reads every walked cell of the repertoires REF names (trial run ids or grid ids, as
 `linkevo walkmodel fit` does), then, for each repertoire in turn, fits the walk model on
-all the others and measures it on that one (`orchestrator.walkmodel.figures`: Spearman of
+all the others and measures it on that one (`orchestrator.walk_model_runs.figures`: Spearman of
 predicted and walked distance among the cells that walk there without breaking, per floor;
 the break classifier's ROC AUC over both floors). Prints a row per held-out repertoire and
 the median. Goal (issue: the learned walk model): Spearman >= 0.8 per floor, AUC >= 0.9.
@@ -24,7 +24,7 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     from linkevo.algorithms.walk_model import WalkModel
-    from linkevo.orchestrator.walkmodel import figures, pooled, walked_repertoires
+    from linkevo.orchestrator.walk_model_runs import figures, pooled, walked_repertoires
     from linkevo.sim.robot.walk_features import FEATURE_NAMES
     from linkevo.workers.store.runs import RunStore
 

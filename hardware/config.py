@@ -11,8 +11,8 @@ from pathlib import Path
 from typing import TypeVar
 
 from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN
-from linkevo.hardware.errors import ConfigError
 from linkevo.hardware.protocol import MAX_ID
+from linkevo.sim.errors import ConfigError
 from linkevo.sim.robot.gait import GaitConfig, limits, range_error
 from linkevo.sim.robot.hexapod import Physics
 

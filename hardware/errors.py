@@ -17,12 +17,8 @@ DEVICE_ERRORS = {
 ALERT_BIT = 0x80
 
 
-class HardwareError(Exception):
-    """Base of every error raised by `hardware/`."""
-
-
-class ConfigError(HardwareError, LinkevoError, ValueError):
-    """A robot config value is missing, unknown or out of range."""
+class HardwareError(LinkevoError):
+    """Base of every error the robot, its bus or its driver raises (`hardware/`)."""
 
 
 class PortError(HardwareError):

@@ -3,9 +3,9 @@
 A field trial is one MLflow run (tag `linkevo.kind=field_trial`) in the source linkage's
 experiment: the measured distances (metric `distance_cm`, one step per repeat, and
 `mean_distance_cm`), the linkage document (`linkage.json`) and each repeat's telemetry.
-Its param `simulated` says where it walked: `False` on the robot, `True` on the bus
-emulator (the driver's dry run; distances typed in), `physics` in the 3-D simulation
-(`linkevo hexapod simulate`, distances predicted).
+Its param `simulated` says where it walked: on the robot, on the bus emulator (the driver's
+dry run; distances typed in) or in the 3-D simulation (`linkevo hexapod simulate`,
+distances predicted); the keys are the run layout's (`workers.store.run_layout`).
 """
 
 from __future__ import annotations
@@ -24,10 +24,7 @@ from linkevo.sim.study import MAP_ELITES, ROBOTS
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.linkages import SourceLinkage
 from linkevo.workers.store.runs import RunStore
-from linkevo.workers.store.tracking import ensure_experiment
 
-REAL, EMULATOR, PHYSICS = "False", "True", "physics"
-"""The values of a field trial's `simulated` param."""
 """Row order of the study's Table I; other approaches follow alphabetically."""
 
 
@@ -80,41 +77,33 @@ def log_field_trial(
         metrics, tags: more of either (a simulated trial's figures, its verdict).
         artifacts: JSON documents by artefact name.
     """
-    from mlflow.tracking import MlflowClient
-
-    client = MlflowClient(tracking_uri=uri)
-    experiment_id = ensure_experiment(uri, client.get_experiment(source.experiment_id).name)
+    store = RunStore.of_experiment(uri, source.experiment_id)
     tags = {
         layout.KIND: layout.FIELD_TRIAL,
-        "source_run_id": source.run_id,
-        "source_cell": "best" if source.cell is None else str(source.cell),
-        SOURCE_GRID: source.grid_id,
-        LINKAGE: linkage_key(source.document),
+        layout.SOURCE_RUN_ID: source.run_id,
+        layout.SOURCE_CELL: "best" if source.cell is None else str(source.cell),
+        layout.SOURCE_GRID: source.grid_id,
+        layout.LINKAGE: linkage_key(source.document),
         layout.APPROACH: source.approach,
         layout.FITNESS: source.fitness,
-        "robot": robot,
-        "floor": floor,
+        layout.ROBOT: robot,
+        layout.FLOOR: floor,
         **(tags or {}),
     }
-    run = client.create_run(
-        experiment_id, run_name=f"field-{source.approach}-{robot}-{floor}", tags=tags
-    )
-    run_id = run.info.run_id
-    for name, value in params.items():
-        client.log_param(run_id, name, value)
+    run_id = store.create_run(f"field-{source.approach}-{robot}-{floor}", tags)
+    store.log_params(run_id, params)
     for step, distance in enumerate(distances):
-        client.log_metric(run_id, "distance_cm", distance, step=step)
+        store.log_metric(run_id, layout.DISTANCE_CM, distance, step=step)
     if distances:
-        client.log_metric(run_id, "mean_distance_cm", statistics.fmean(distances))
+        store.log_metric(run_id, layout.MEAN_DISTANCE_CM, statistics.fmean(distances))
     for name, value in (metrics or {}).items():
-        client.log_metric(run_id, name, value)
-    client.log_dict(run_id, source.document, layout.LINKAGE_JSON)
+        store.log_metric(run_id, name, value)
+    store.log_document(run_id, source.document, layout.LINKAGE_JSON)
     for name, document in (artifacts or {}).items():
-        client.log_dict(run_id, document, name)
+        store.log_document(run_id, document, name)
     for path in telemetry:
-        folder = "telemetry" if path.suffix == ".csv" else "pictures"
-        client.log_artifact(run_id, str(path), folder)
-    client.set_terminated(run_id)
+        store.log_artefact(run_id, path, "telemetry" if path.suffix == ".csv" else "pictures")
+    store.end_run(run_id)
     return run_id
 
 
@@ -210,9 +199,8 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
     the emulator's dry runs alone. Trials are grouped by the linkage they walked and its
     grid, never pooled across linkages."""
     store = RunStore(uri, experiment)
-    client = store.client
     runs = store.search(layout.where(layout.FIELD_TRIAL), order_by=["attributes.start_time ASC"])
-    shown_kind = EMULATOR if simulated else REAL
+    shown_kind = layout.EMULATOR if simulated else layout.REAL
     distances: dict[tuple[int, str, str], list[float]] = {}
     predicted: dict[tuple[int, str, str], list[float]] = {}
     broken: set[tuple[int, str, str]] = set()
@@ -220,26 +208,26 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
     rows: list[TableRow] = []
     left_out = 0
     for run in runs:
-        kind = run.data.params.get("simulated", REAL)
-        if kind not in (shown_kind, PHYSICS) or (simulated and kind == PHYSICS):
+        kind = run.data.params.get(layout.SIMULATED, layout.REAL)
+        if kind not in (shown_kind, layout.PHYSICS) or (simulated and kind == layout.PHYSICS):
             left_out += 1
             continue
         tags = run.data.tags
-        floor, robot = tags.get("floor", "?"), tags.get("robot", "first")
+        floor, robot = tags.get(layout.FLOOR, "?"), tags.get(layout.ROBOT, "first")
         if floor not in floors:
             floors.append(floor)
         i = _row(
             rows,
             tags.get(layout.APPROACH, "unknown"),
-            tags.get(SOURCE_GRID, ""),
+            tags.get(layout.SOURCE_GRID, ""),
             robot,
             _walked(tags),
         )
         key = (i, robot, floor)
-        history = [m.value for m in client.get_metric_history(run.info.run_id, "distance_cm")]
-        if kind == PHYSICS:
+        history = list(store.metric_history(run.info.run_id, layout.DISTANCE_CM).values())
+        if kind == layout.PHYSICS:
             predicted.setdefault(key, []).extend(history)
-            if tags.get("breaks") == "True":
+            if tags.get(layout.BREAKS) == "True":
                 broken.add(key)
         else:
             distances.setdefault(key, []).extend(history)
@@ -267,18 +255,12 @@ def trial_table(uri: str, experiment: str, *, simulated: bool = False) -> TrialT
     )
 
 
-SOURCE_GRID = "source_grid_id"
-"""A field trial's tag: the grid of the trial its linkage came from."""
-LINKAGE = "linkage"
-"""A field trial's tag: `linkage_key` of the linkage it walked."""
-
-
 def _walked(tags: dict[str, str]) -> str:
     """How a table names the linkage a field trial walked: its source run and cell."""
-    run_id, cell = tags.get("source_run_id", ""), tags.get("source_cell", "best")
+    run_id, cell = tags.get(layout.SOURCE_RUN_ID, ""), tags.get(layout.SOURCE_CELL, "best")
     if run_id:
         return f"run {run_id}" + ("" if cell == "best" else f" cell {cell}")
-    return f"document {tags.get(LINKAGE, '?')}"
+    return f"document {tags.get(layout.LINKAGE, '?')}"
 
 
 def _row(rows: list[TableRow], approach: str, grid: str, robot: str, walked: str) -> int:

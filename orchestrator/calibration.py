@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.hardware.config import RobotConfig
-from linkevo.hardware.field_trial import REAL
 from linkevo.orchestrator.simulated_trials import gait_of
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.linkage_doc import from_document
@@ -36,6 +35,7 @@ from linkevo.sim.robot.leg import leg_from_genome
 from linkevo.sim.robot.walking import WalkSettings, walk
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import read_document
+from linkevo.workers.store.runs import NotFound
 
 GAIT_KEYS: tuple[str, ...] = ("speed_rpm", "kp", "ki", "kd")
 """The gait's values a calibration may fit (`[gait]` of the robot config)."""
@@ -97,18 +97,18 @@ def read_field_trials(store, run_ids: list[str]) -> list[FieldTrial]:
     trials = []
     for run_id in run_ids:
         try:
-            run = store.client.get_run(run_id)
-        except Exception as exc:
+            run = store.run(run_id)
+        except NotFound as exc:
             raise CalibrationError(f"--trials {run_id}: no such run in {store.uri}") from exc
         tags, params = run.data.tags, run.data.params
         if tags.get(layout.KIND) != layout.FIELD_TRIAL:
             raise CalibrationError(f"--trials {run_id}: not a field trial (linkevo hexapod trial)")
-        if params.get("simulated", REAL) != REAL:
+        if params.get(layout.SIMULATED, layout.REAL) != layout.REAL:
             raise CalibrationError(
                 f"--trials {run_id}: a simulated field trial (simulated = "
-                f"{params['simulated']}); allowed: trials walked by the real robot only"
+                f"{params[layout.SIMULATED]}); allowed: trials walked by the real robot only"
             )
-        history = store.client.get_metric_history(run_id, "distance_cm")
+        history = store.metric_history(run_id, layout.DISTANCE_CM)
         if not history:
             raise CalibrationError(f"--trials {run_id}: the field trial has no distances")
         with tempfile.TemporaryDirectory() as tmp:
@@ -117,9 +117,9 @@ def read_field_trials(store, run_ids: list[str]) -> list[FieldTrial]:
             FieldTrial(
                 run_id=run_id,
                 document=document,
-                floor=tags.get("floor", ""),
-                seconds=float(params.get("seconds", "10")),
-                distance_cm=float(np.mean([m.value for m in history])),
+                floor=tags.get(layout.FLOOR, ""),
+                seconds=float(params.get(layout.SECONDS, "10")),
+                distance_cm=float(np.mean(list(history.values()))),
             )
         )
     return trials

@@ -46,7 +46,7 @@ from linkevo.workers.store.outage import (
 )
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import ensure_experiment, resolve_tracking_uri
-from linkevo.workers.trial_task import TrialOutcome, end_run, outcome_of
+from linkevo.workers.trial_task import TrialOutcome, outcome_of
 
 if TYPE_CHECKING:
     from mlflow.entities import Run
@@ -133,7 +133,7 @@ def launch(
         experiment_id = ensure_experiment(uri, cfg.experiment)
         store = RunStore(uri, cfg.experiment, experiment_id=experiment_id)
         check_seed(store, cfg.seed_from)
-        lease = Lease.take(store.client, uri, experiment_id, Subject.grid(grid.grid_id))
+        lease = Lease.take(store, Subject.grid(grid.grid_id))
         root = work_root(cfg, uri)
         finished = _settle_earlier_runs(store, grid, root, resume=resume, restart=restart)
         todo = [cell for cell in grid.cells if cell.key not in finished]
@@ -197,7 +197,7 @@ def _settle_earlier_runs(
     finished = {r.data.tags[layout.TRIAL_KEY]: r for r in earlier if r.info.status == "FINISHED"}
     for run in earlier:
         if run.info.status == "RUNNING":
-            end_run(store.client, run.info.run_id, "KILLED", "stale: the grid driver stopped")
+            store.end_run(run.info.run_id, "KILLED", "stale: the grid driver stopped")
     done_restarts = sorted(set(restart) & set(finished))
     if done_restarts:
         raise ConfigError(
@@ -225,8 +225,8 @@ def _run_trials(
             exc.finished += finished
         if not isinstance(exc, ServerLost) and answers(uri):
             for run in ctx.store.trial_runs(grid.grid_id, status="RUNNING"):
-                end_run(ctx.client, run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
-            end_run(ctx.client, ctx.parent_run_id, "KILLED", layout.error_text(exc))
+                ctx.store.end_run(run.info.run_id, "KILLED", f"the grid driver stopped: {exc}")
+            ctx.store.end_run(ctx.parent_run_id, "KILLED", layout.error_text(exc))
         elif not isinstance(exc, ServerLost | KeyboardInterrupt | GridInterrupted):
             since = watch.down_since or time.time()
             during = f"the driver ({layout.error_text(exc)})"
@@ -240,7 +240,7 @@ def _run_trials(
 def _end_parent_run(ctx: TrialContext, grid: Grid, outcomes: tuple[TrialOutcome, ...]) -> None:
     """Logs the grid's summary to its parent run and ends it FINISHED, or FAILED when a
     trial did not finish (waiting out a silent server within its limit)."""
-    client, limit = ctx.client, ctx.watch.limit_s
+    store, limit = ctx.store, ctx.watch.limit_s
     status = "FINISHED" if all(o.status == "FINISHED" for o in outcomes) else "FAILED"
-    patiently(lambda: log_grid_summary(client, ctx.parent_run_id, grid, outcomes), ctx.uri, limit)
-    patiently(lambda: client.set_terminated(ctx.parent_run_id, status), ctx.uri, limit)
+    patiently(lambda: log_grid_summary(store, ctx.parent_run_id, grid, outcomes), ctx.uri, limit)
+    patiently(lambda: store.end_run(ctx.parent_run_id, status), ctx.uri, limit)

@@ -291,7 +291,7 @@ def explore(
             predicted = store.walk_prediction(trial.run_id, Path(tmp) / f"{trial.run_id}-pred")
             model_run = None
             if predicted is not None:
-                model_run = store.client.get_run(trial.run_id).data.tags.get(layout.PREDICTED_BY)
+                model_run = store.tags(trial.run_id).get(layout.PREDICTED_BY)
             views.append(repertoire_view(table, trial, drawn, walks, predicted, model_run))
             if progress is not None:
                 progress(done, trial)
@@ -300,5 +300,5 @@ def explore(
             named = shutil.copyfile(
                 out, Path(tmp) / layout.EXPLORER_HTML
             )  # the name it is logged as
-            store.client.log_artifact(log_to, str(named))
+            store.log_artefact(log_to, named)
     return out

@@ -11,19 +11,18 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from mlflow.tracking import MlflowClient
-
 from linkevo.orchestrator.grid import Grid, TrialCell, trial_dir
 from linkevo.orchestrator.progress import Progress
 from linkevo.orchestrator.reservation import Reservation
+from linkevo.sim.errors import LinkevoError
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.outage import ServerLost, ServerWatch, patiently
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial_spec import TrialSpec
-from linkevo.workers.trial_task import TrialJob, TrialOutcome, end_run
+from linkevo.workers.trial_task import TrialJob, TrialOutcome
 
 
-class GridInterrupted(Exception):
+class GridInterrupted(LinkevoError):
     """A SIGINT or SIGTERM stopped the grid; the in-flight trials were stopped and their
     runs marked KILLED, so `--resume` completes the grid.
 
@@ -71,10 +70,6 @@ class TrialContext:
     def experiment_id(self) -> str:
         return self.store.experiment_id
 
-    @property
-    def client(self) -> MlflowClient:
-        return self.store.client
-
     def job(self, grid: Grid, cell: TrialCell) -> TrialJob:
         """Returns the trial task's input for one cell."""
         return TrialJob(
@@ -101,7 +96,7 @@ def lost_trial(
     runs = ctx.store.trial_runs(grid_id, trial_key=cell.key)
     for run in runs:
         if run.info.status == "RUNNING":
-            end_run(ctx.client, run.info.run_id, "FAILED", message)
+            ctx.store.end_run(run.info.run_id, "FAILED", message)
     run_id = runs[0].info.run_id if runs else ""
     return TrialOutcome(cell.key, "FAILED", run_id, None, None, 0.0, message)
 

@@ -6,11 +6,7 @@ from __future__ import annotations
 import socket
 import statistics
 
-from mlflow.entities import Param
-from mlflow.tracking import MlflowClient
-
-from linkevo.orchestrator.config import GridConfig
-from linkevo.orchestrator.config_text import flatten, to_toml
+from linkevo.orchestrator.config import GridConfig, flatten, to_toml
 from linkevo.orchestrator.grid import Grid
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.runs import RunStore
@@ -19,18 +15,17 @@ from linkevo.workers.trial_task import TrialOutcome
 
 def parent_run(store: RunStore, grid: Grid) -> str:
     """Returns the grid's parent run id, reusing an earlier launch's run on resume."""
-    client, experiment_id = store.client, store.experiment_id
     existing = store.grid_runs(grid.grid_id, first=True, limit=1)  # what every resume reuses
     if existing:
         first = existing[0]
         run_id = first.info.run_id
-        client.update_run(run_id, status="RUNNING")
+        store.set_running(run_id)
         if layout.ERROR in first.data.tags:  # the error of a launch that is over
-            client.delete_tag(run_id, layout.ERROR)
+            store.delete_tag(run_id, layout.ERROR)
         if first.data.tags.get(layout.TRIALS) != str(grid.config.trials):  # extended
-            client.set_tag(run_id, layout.TRIALS, str(grid.config.trials))
-            client.log_dict(run_id, grid.config.to_dict(), layout.GRID_CONFIG_JSON)
-            client.log_text(run_id, to_toml(grid.config), layout.GRID_CONFIG_TOML)
+            store.set_tag(run_id, layout.TRIALS, str(grid.config.trials))
+            store.log_document(run_id, grid.config.to_dict(), layout.GRID_CONFIG_JSON)
+            store.log_text(run_id, to_toml(grid.config), layout.GRID_CONFIG_TOML)
         return run_id
     tags = {
         layout.KIND: layout.GRID,
@@ -40,14 +35,12 @@ def parent_run(store: RunStore, grid: Grid) -> str:
         layout.HOST: socket.gethostname(),
         layout.NOTE: grid_description(grid),
     }
-    run_id = client.create_run(experiment_id, run_name=f"grid-{grid.grid_id}", tags=tags)
-    run_id = run_id.info.run_id
+    run_id = store.create_run(f"grid-{grid.grid_id}", tags)
     # `trials` is a tag, not a param: an extended grid's count changes, a param cannot.
-    params = [Param(k, v) for k, v in flatten(grid.config.to_dict()).items() if k != "trials"]
-    for start in range(0, len(params), 100):
-        client.log_batch(run_id, params=params[start : start + 100])
-    client.log_dict(run_id, grid.config.to_dict(), layout.GRID_CONFIG_JSON)
-    client.log_text(run_id, to_toml(grid.config), layout.GRID_CONFIG_TOML)
+    params = {k: v for k, v in flatten(grid.config.to_dict()).items() if k != "trials"}
+    store.log_params(run_id, params)
+    store.log_document(run_id, grid.config.to_dict(), layout.GRID_CONFIG_JSON)
+    store.log_text(run_id, to_toml(grid.config), layout.GRID_CONFIG_TOML)
     return run_id
 
 
@@ -95,15 +88,17 @@ def cell_summaries(
 
 
 def log_grid_summary(
-    client: MlflowClient, run_id: str, grid: Grid, outcomes: tuple[TrialOutcome, ...]
+    store: RunStore, run_id: str, grid: Grid, outcomes: tuple[TrialOutcome, ...]
 ) -> None:
     """Logs the grid's summary to its parent run as one table (`layout.GRID_SUMMARY`) and
     as a Markdown table in its description, which the MLflow UI shows on the run's page
     (a resumed grid writes both again, updated)."""
     rows = cell_summaries(grid.config, outcomes)
     data = [[row[c] for c in SUMMARY_COLUMNS] for row in rows]
-    client.log_dict(run_id, {"columns": list(SUMMARY_COLUMNS), "data": data}, layout.GRID_SUMMARY)
-    client.set_tag(run_id, layout.NOTE, f"{grid_description(grid)}\n\n{summary_markdown(rows)}")
+    store.log_document(
+        run_id, {"columns": list(SUMMARY_COLUMNS), "data": data}, layout.GRID_SUMMARY
+    )
+    store.set_tag(run_id, layout.NOTE, f"{grid_description(grid)}\n\n{summary_markdown(rows)}")
 
 
 def summary_markdown(rows: list[dict[str, object]]) -> str:

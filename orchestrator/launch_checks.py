@@ -118,18 +118,16 @@ def check_seed(store: RunStore, run_id: str) -> None:
     trial of the store with a repertoire and a walk map: what a warm start reads."""
     if not run_id:
         return
-    from mlflow.exceptions import MlflowException
-
     from linkevo.sim.study import is_map_elites
+    from linkevo.workers.store.runs import NotFound
 
     try:
-        run = store.client.get_run(run_id)
-    except MlflowException:
+        approach = store.tags(run_id).get(layout.APPROACH, "")
+    except NotFound:
         raise ConfigError(
             f"config key 'seed_from' = {run_id!r} is invalid: no such run in {store.uri}"
         ) from None
-    approach = run.data.tags.get(layout.APPROACH, "")
-    held = {a.path for a in store.client.list_artifacts(run_id)}
+    held = store.artefact_names(run_id)
     missing = [n for n in (layout.REPERTOIRE, layout.WALK_MAP) if n not in held]
     if not is_map_elites(approach) or missing:
         raise ConfigError(

@@ -21,11 +21,10 @@ import time
 import uuid
 from dataclasses import asdict, dataclass
 
-from mlflow.tracking import MlflowClient
-
-from linkevo.orchestrator.config import ConfigError
+from linkevo.sim.errors import LinkevoError
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import process_alive
+from linkevo.workers.store.runs import RunStore
 from linkevo.workers.store.tracking import store_lock
 
 LEASE_TTL_S = 60.0
@@ -38,7 +37,7 @@ the lease back: of two drivers that took it at once, the one whose write landed 
 keeps it and the other is refused."""
 
 
-class Busy(ConfigError):
+class Busy(LinkevoError):
     """Another process holds the lease; the message says who and what to do."""
 
 
@@ -101,15 +100,15 @@ class Subject:
 class Lease:
     """A lease, held by this process from `take` to `release`."""
 
-    def __init__(self, uri: str, experiment_id: str, subject: Subject, holder: Holder) -> None:
-        self._uri, self._experiment, self._subject = uri, experiment_id, subject
+    def __init__(self, store: RunStore, subject: Subject, holder: Holder) -> None:
+        self._store, self._subject = store, subject
         self._key = layout.lease_tag(subject.name)
         self._holder = holder
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._renew, name="lease", daemon=True)
 
     @classmethod
-    def take(cls, client: MlflowClient, uri: str, experiment_id: str, subject: Subject) -> Lease:
+    def take(cls, store: RunStore, subject: Subject) -> Lease:
         """Takes the lease and starts renewing it.
 
         Raises:
@@ -117,22 +116,22 @@ class Lease:
         """
         now = time.time()
         me = Holder(socket.gethostname(), os.getpid(), now, now, uuid.uuid4().hex)
-        lease = cls(uri, experiment_id, subject, me)
-        with store_lock(uri):
-            lease._refuse_if_held(client, now)
-            lease._write(client, me)
-        if not uri.startswith("sqlite:///"):
+        lease = cls(store, subject, me)
+        with store_lock(store.uri):
+            lease._refuse_if_held(store, now)
+            lease._write(store, me)
+        if not store.uri.startswith("sqlite:///"):
             time.sleep(CONFIRM_S)
-            lease._refuse_if_held(client, time.time())
+            lease._refuse_if_held(store, time.time())
         lease._thread.start()
         return lease
 
     @classmethod
-    def refuse_if_held(cls, client: MlflowClient, experiment_id: str, subject: Subject) -> None:
+    def refuse_if_held(cls, store: RunStore, subject: Subject) -> None:
         """Raises Busy when a live process holds the lease (checked, not taken)."""
         now = time.time()
         nobody = Holder("", 0, now, now, "")
-        cls("", experiment_id, subject, nobody)._refuse_if_held(client, now)
+        cls(store, subject, nobody)._refuse_if_held(store, now)
 
     def release(self, write: bool = True) -> None:
         """Stops renewing and hands the lease back (if it is still this driver's); with
@@ -143,14 +142,18 @@ class Lease:
             self._thread.join()
         if not write:
             return
-        client = MlflowClient(self._uri)
+        store = self._own_store()
         with contextlib.suppress(Exception):  # a store that went away keeps a lease that expires
-            current = self._read(client)
+            current = self._read(store)
             if current is not None and current.token == self._holder.token:
-                client.delete_experiment_tag(self._experiment, self._key)
+                store.delete_experiment_tag(self._key)
 
-    def _refuse_if_held(self, client: MlflowClient, now: float) -> None:
-        current = self._read(client)
+    def _own_store(self) -> RunStore:
+        """A store of this process's own (the renewing thread's, and the release's)."""
+        return RunStore(self._store.uri, experiment_id=self._store.experiment_id)
+
+    def _refuse_if_held(self, store: RunStore, now: float) -> None:
+        current = self._read(store)
         if current is None or current.token == self._holder.token or not current.alive(now):
             return
         expires = LEASE_TTL_S - (now - current.renewed)
@@ -161,9 +164,8 @@ class Lease:
             f"{expires:.0f} s and --resume then takes over"
         )
 
-    def _read(self, client: MlflowClient) -> Holder | None:
-        tags = client.get_experiment(self._experiment).tags
-        text = tags.get(self._key)
+    def _read(self, store: RunStore) -> Holder | None:
+        text = store.experiment_tag(self._key)
         if text is None:
             return None
         try:
@@ -171,12 +173,12 @@ class Lease:
         except (TypeError, ValueError):
             return None  # a damaged lease binds nobody
 
-    def _write(self, client: MlflowClient, holder: Holder) -> None:
-        client.set_experiment_tag(self._experiment, self._key, json.dumps(asdict(holder)))
+    def _write(self, store: RunStore, holder: Holder) -> None:
+        store.set_experiment_tag(self._key, json.dumps(asdict(holder)))
 
     def _renew(self) -> None:
-        client = MlflowClient(self._uri)
+        store = self._own_store()
         while not self._stop.wait(RENEW_S):
             holder = Holder(**{**asdict(self._holder), "renewed": time.time()})
             with contextlib.suppress(Exception):  # an unreachable store: try again next time
-                self._write(client, holder)
+                self._write(store, holder)

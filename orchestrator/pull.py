@@ -279,7 +279,7 @@ def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
         predicted = store.walk_prediction(source.run_id, Path(tmp))
     if predicted is None:
         return {}
-    model = store.client.get_run(source.run_id).data.tags.get(layout.PREDICTED_BY, "")
+    model = store.tags(source.run_id).get(layout.PREDICTED_BY, "")
     rows = predicted[predicted["cell"] == source.cell]
     order = in_floor_order(rows["floor"])
     rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")

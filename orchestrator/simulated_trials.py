@@ -8,13 +8,14 @@ import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from linkevo.hardware.field_trial import PHYSICS, log_field_trial
+from linkevo.hardware.field_trial import log_field_trial
 from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
 from linkevo.sim.robot.field_summary import summary
 from linkevo.sim.robot.hexapod import LEG_SLOTS
 from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.sim.robot.walk_rows import AS_EVOLVED, LEGO_BUILD
 from linkevo.sim.robot.walking import Walk, WalkSettings, field_trials
+from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.linkages import SourceLinkage
 
@@ -169,15 +170,15 @@ def log_simulated(
         floor=result["floor"],
         distances=distances,
         params={
-            "simulated": PHYSICS,
-            "seconds": str(result["seconds"]),
+            layout.SIMULATED: layout.PHYSICS,
+            layout.SECONDS: str(result["seconds"]),
             "repeats": str(len(result["distance_cm"])),
             "seed": str(seed),
             "leg": result.get("leg", ""),
             "model": result.get("model", ""),
         },
         metrics=metrics,
-        tags={"breaks": str(result["breaks"]), "reason": result["reason"][:5000]},
+        tags={layout.BREAKS: str(result["breaks"]), layout.REASON: result["reason"][:5000]},
         artifacts={"simulated_trial.json": result},
         telemetry=list(pictures),
     )

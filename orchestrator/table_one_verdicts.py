@@ -14,6 +14,7 @@ draw (the paper's protocol to the letter) no claim can be more than "direction o
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -28,7 +29,9 @@ from linkevo.orchestrator.report.verdicts import (
     REPRODUCED,
     weakest,
 )
-from linkevo.sim.robot.hexapod import FLOORS, ROBOT_MODELS
+from linkevo.sim.robot.hexapod import CARPET, FLAT, ROBOT_MODELS
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER
+from linkevo.sim.study import MAP_ELITES, ROBOTS
 
 WALK_CM = 10.0
 """A robot walks when it moves forward more than this in the walk without breaking: a
@@ -58,113 +61,155 @@ def walks(table: pd.DataFrame) -> pd.Series:
     return ~table.breaks.astype(bool) & (_distance(table) > WALK_CM)
 
 
-def _per_draw(table: pd.DataFrame, approach: str, robot: str) -> pd.DataFrame:
-    """One row per draw of a robot: its distance and whether it walks, per floor."""
-    rows = table[(table.approach == approach) & (table.robot == robot)]
-    return rows.assign(d=_distance(rows), w=walks(rows)).pivot(
-        index="draw", columns="floor", values=["d", "w"]
-    )
+@dataclass(frozen=True)
+class Draw:
+    """One drawn trial of an approach on one model: each robot's distance (cm) and whether
+    it walks, per floor (a robot or floor the table lacks is missing)."""
+
+    cm: dict[tuple[str, str], float]
+    walks: dict[tuple[str, str], bool]
+
+    def has(self, robot: str) -> bool:
+        return all((robot, f) in self.cm for f in FLOOR_ORDER)
 
 
-def _count(part: str, yes: int, n: int) -> tuple[str, str]:
-    return sign_verdict(yes, n), f"{part}: {yes} of {n} draws"
+def draws(table: pd.DataFrame, approach: str) -> list[Draw]:
+    """Returns one model's draws of an approach, in draw order."""
+    rows = table[table.approach == approach].assign(d=_distance, w=walks)
+    out = []
+    for _, part in rows.groupby("draw", sort=True):
+        keys = list(zip(part.robot, part.floor, strict=True))
+        out.append(Draw(dict(zip(keys, part.d, strict=True)), dict(zip(keys, part.w, strict=True))))
+    return out
 
 
-def _claims() -> list[tuple[str, str, Callable[[pd.DataFrame], list[tuple[str, str]]]]]:
-    """The claims: (claim, where, its parts on one model's table)."""
+Test = Callable[[Draw], "bool | None"]
+"""Whether a draw goes the claimed way; None where it does not bear on it (a tie, or a
+robot the draw lacks)."""
 
-    def cannot_walk(approach: str, robot: str):
-        def parts(t):
-            d = _per_draw(t, approach, robot)
-            if d.empty:
-                return []
-            never = ~d["w"].any(axis=1)
-            return [_count(f"{approach} {robot} walks on neither floor", int(never.sum()), len(d))]
 
-        return parts
+@dataclass(frozen=True)
+class Part:
+    """One count a claim rests on: of an approach's draws that bear on `test`, how many go
+    the claimed way."""
 
-    def walked(t):
-        out = []
-        for approach, robot in (
-            ("MAP-WH", "first"),
-            ("MAP-LIS", "modified"),
-            ("MAP-ST", "first"),
-            ("MAP-ST", "modified"),
-            ("MAP-AU", "first"),
-            ("MAP-AU", "modified"),
-        ):
-            d = _per_draw(t, approach, robot)
-            if not d.empty:
-                both = d["w"].all(axis=1)
-                out.append(
-                    _count(f"{approach} {robot} walks on both floors", int(both.sum()), len(d))
-                )
-        return out
+    approach: str
+    text: str
+    test: Test
 
-    def against_first(approach: str, floors: tuple[str, ...], quicker: bool):
-        def parts(t):
-            first, modified = _per_draw(t, approach, "first"), _per_draw(t, approach, "modified")
-            if first.empty or modified.empty:
-                return []
-            both = first.index.intersection(modified.index)
-            out = []
-            for floor in floors:
-                a, b = first.loc[both, ("d", floor)], modified.loc[both, ("d", floor)]
-                differ = a != b  # a tie goes neither way
-                claimed = (b > a) if quicker else (b < a)
-                word = "quicker" if quicker else "slower"
-                part = f"{approach} modified {word} than first on {floor}"
-                out.append(_count(part, int(claimed[differ].sum()), int(differ.sum())))
-            return out
+    def judge(self, found: list[Draw]) -> tuple[str, str]:
+        """Returns the verdict and its evidence over the draws."""
+        said = [s for s in (self.test(d) for d in found) if s is not None]
+        yes = sum(said)
+        evidence = f"{self.approach} {self.text}: {yes} of {len(said)} draws"
+        return sign_verdict(yes, len(said)), evidence
 
-        return parts
 
-    def carpet_only(t):
-        out = []
-        for approach, robot in t[["approach", "robot"]].drop_duplicates().itertuples(index=False):
-            d = _per_draw(t, approach, robot)
-            faster = d[("d", "carpet")] > d[("d", "flat")]
-            if approach == "MAP-LIS" and robot == "modified":
-                out.append(
-                    _count("MAP-LIS modified faster on carpet than flat", int(faster.sum()), len(d))
-                )
-            else:
-                out.append(
-                    _count(f"{approach} {robot} not faster on carpet", int((~faster).sum()), len(d))
-                )
-        return out
+def never_walks(robot: str) -> Test:
+    return lambda d: not any(d.walks[(robot, f)] for f in FLOOR_ORDER) if d.has(robot) else None
 
-    return [
-        (
-            "The MAP-LIS first robot was incapable of walking: its legs were too large to "
-            "support the weight of the robot frame",
-            "Section V-B",
-            cannot_walk("MAP-LIS", "first"),
+
+def walks_on_both(robot: str) -> Test:
+    return lambda d: all(d.walks[(robot, f)] for f in FLOOR_ORDER) if d.has(robot) else None
+
+
+def modified_than_first(floor: str, quicker: bool) -> Test:
+    def test(d: Draw) -> bool | None:
+        if not (d.has("first") and d.has("modified")):
+            return None
+        first, modified = d.cm[("first", floor)], d.cm[("modified", floor)]
+        if first == modified:
+            return None  # a tie goes neither way
+        return modified > first if quicker else modified < first
+
+    return test
+
+
+def faster_on_carpet(robot: str, faster: bool) -> Test:
+    def test(d: Draw) -> bool | None:
+        if not d.has(robot):
+            return None
+        return (d.cm[(robot, CARPET)] > d.cm[(robot, FLAT)]) == faster
+
+    return test
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One of the paper's prototyping claims: its words, where it is made, and its parts."""
+
+    text: str
+    where: str
+    parts: tuple[Part, ...]
+
+
+def _carpet_parts() -> tuple[Part, ...]:
+    """ "The MAP-LIS modified robot was the only one faster on carpet": that one is, and
+    every other robot is not."""
+    out = []
+    for approach in MAP_ELITES:
+        for robot in ROBOTS:
+            only = (approach, robot) == ("MAP-LIS", "modified")
+            text = (
+                f"{robot} faster on carpet than flat" if only else f"{robot} not faster on carpet"
+            )
+            out.append(Part(approach, text, faster_on_carpet(robot, only)))
+    return tuple(out)
+
+
+CLAIMS: tuple[Claim, ...] = (
+    Claim(
+        "The MAP-LIS first robot was incapable of walking: its legs were too large to "
+        "support the weight of the robot frame",
+        "Section V-B",
+        (Part("MAP-LIS", "first walks on neither floor", never_walks("first")),),
+    ),
+    Claim(
+        "The MAP-WH modified robot (a larger path with much higher lift) was not capable "
+        "of producing a walking gait",
+        "Section V-B",
+        (Part("MAP-WH", "modified walks on neither floor", never_walks("modified")),),
+    ),
+    Claim(
+        "The other six robots walked on both floors",
+        "Table I",
+        tuple(
+            Part(approach, f"{robot} walks on both floors", walks_on_both(robot))
+            for approach, robot in (
+                ("MAP-WH", "first"),
+                ("MAP-LIS", "modified"),
+                ("MAP-ST", "first"),
+                ("MAP-ST", "modified"),
+                ("MAP-AU", "first"),
+                ("MAP-AU", "modified"),
+            )
         ),
+    ),
+    Claim(
+        "The MAP-ST modified robot (a slightly wider path) walked quicker on the flat floor",
+        "Section V-B",
         (
-            "The MAP-WH modified robot (a larger path with much higher lift) was not capable "
-            "of producing a walking gait",
-            "Section V-B",
-            cannot_walk("MAP-WH", "modified"),
+            Part(
+                "MAP-ST", f"modified quicker than first on {FLAT}", modified_than_first(FLAT, True)
+            ),
         ),
-        ("The other six robots walked on both floors", "Table I", walked),
-        (
-            "The MAP-ST modified robot (a slightly wider path) walked quicker on the flat floor",
-            "Section V-B",
-            against_first("MAP-ST", ("flat",), quicker=True),
+    ),
+    Claim(
+        "The modified MAP-AU robot moved slightly slower than the original on both floors",
+        "Section V-B",
+        tuple(
+            Part("MAP-AU", f"modified slower than first on {f}", modified_than_first(f, False))
+            for f in FLOOR_ORDER
         ),
-        (
-            "The modified MAP-AU robot moved slightly slower than the original on both floors",
-            "Section V-B",
-            against_first("MAP-AU", FLOORS, quicker=False),
-        ),
-        (
-            "The MAP-LIS modified robot was the only one that walked faster on the carpet "
-            "than the flat floor",
-            "Section V-B",
-            carpet_only,
-        ),
-    ]
+    ),
+    Claim(
+        "The MAP-LIS modified robot was the only one that walked faster on the carpet "
+        "than the flat floor",
+        "Section V-B",
+        _carpet_parts(),
+    ),
+)
+"""The paper's prototyping claims, in the paper's order."""
 
 
 def judge_prototyping(table: pd.DataFrame) -> pd.DataFrame:
@@ -176,10 +221,15 @@ def judge_prototyping(table: pd.DataFrame) -> pd.DataFrame:
             mean_distance_cm, breaks).
     """
     rows = []
-    for claim, where, parts in _claims():
-        row: dict[str, object] = {"claim": claim, "where": where}
+    for claim in CLAIMS:
+        row: dict[str, object] = {"claim": claim.text, "where": claim.where}
         for model in ROBOT_MODELS:
-            found = parts(table[table.model == model])
+            mine = table[table.model == model]
+            found = [
+                part.judge(draws(mine, part.approach))
+                for part in claim.parts
+                if (mine.approach == part.approach).any()
+            ]
             judged = [v for v, _ in found if v != NOT_TESTABLE]
             row[f"verdict_{model}"] = weakest(judged) if judged else NOT_TESTABLE
             row[f"evidence_{model}"] = "; ".join(e for _, e in found) or "no such robot"

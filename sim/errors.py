@@ -13,3 +13,8 @@ from __future__ import annotations
 
 class LinkevoError(Exception):
     """Something linkevo refuses; the message says what, what is allowed and what to do."""
+
+
+class ConfigError(LinkevoError, ValueError):
+    """A configuration value (a grid's, or a robot's) that cannot be used: missing, unknown
+    or out of range; the message names the key and what is allowed."""

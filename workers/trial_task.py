@@ -14,8 +14,7 @@ from typing import TypeVar
 
 import numba
 import ray
-from mlflow.entities import Param, Run
-from mlflow.tracking import MlflowClient
+from mlflow.entities import Run
 
 from linkevo.workers.evaluators import Evaluator, make_evaluator
 from linkevo.workers.seed_repertoire import SEED_DIR, fetch_seed, read_seed
@@ -127,13 +126,6 @@ class TrialOutcome:
     qd_score: float | None = None
 
 
-def end_run(client: MlflowClient, run_id: str, status: str, message: str = "") -> None:
-    """Ends a run with `status`, tagging `error` with the (truncated) message if any."""
-    if message:
-        client.set_tag(run_id, layout.ERROR, message[: layout.ERROR_CHARS])
-    client.set_terminated(run_id, status)
-
-
 def outcome_of(run: Run, seconds: float = 0.0) -> TrialOutcome:
     """Returns the outcome a finished or failed trial run records."""
     metrics = run.data.metrics
@@ -174,7 +166,6 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
     """
     use_quick_http()
     store = RunStore(job.tracking_uri, experiment_id=job.experiment_id)
-    client = store.client
 
     def wait(call: Callable[[], T]) -> T:  # a silent server is waited for, within a limit
         return patiently(call, job.tracking_uri, job.outage_s)
@@ -185,17 +176,14 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
             return outcome_of(run)
     for run in earlier:
         if run.info.status == "RUNNING":
-            wait(lambda r=run: end_run(client, r.info.run_id, "KILLED", "superseded by a retry"))
-    run_id = wait(
-        lambda: client.create_run(job.experiment_id, run_name=job.trial_key, tags=job.tags())
-    ).info.run_id
+            wait(lambda r=run: store.end_run(r.info.run_id, "KILLED", "superseded by a retry"))
+    run_id = wait(lambda: store.create_run(job.trial_key, job.tags()))
     spec_values = asdict(job.spec)
     names = SPEC_PARAMS + (("walks", "surrogate") if job.spec.walking_trial else ())
-    params = [Param(k, str(spec_values[k])) for k in names]
-    wait(lambda: client.log_batch(run_id, params=params))
+    wait(lambda: store.log_params(run_id, {k: spec_values[k] for k in names}))
     start = time.monotonic()
     evaluator: Evaluator | None = None
-    recorder = MlflowRecorder(client, run_id, outage_s=job.outage_s)
+    recorder = store.recorder(run_id, job.outage_s)
     try:
         out_dir = Path(job.out_dir)
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -212,25 +200,25 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         if spec.seed_from:
             seed = read_seed(wait(lambda: fetch_seed(store, spec.seed_from, out_dir / SEED_DIR)))
         result = run_trial(spec, evaluator, recorder, out_dir, resume=True, seed=seed)
-        wait(lambda: client.set_tag(run_id, layout.STOPPED_BY, result.stopped_by))
+        wait(lambda: store.set_tag(run_id, layout.STOPPED_BY, result.stopped_by))
     except ServerLost:
         raise  # nothing can be written; the driver stops the grid, --resume marks the run
     except RETRYABLE_ERRORS as exc:
         _flush_quietly(recorder)
         message = layout.error_text(exc)
-        wait(lambda: end_run(client, run_id, "KILLED", message))
+        wait(lambda: store.end_run(run_id, "KILLED", message))
         raise
     except Exception as exc:
         _flush_quietly(recorder)
         message = layout.error_text(exc)
-        wait(lambda: end_run(client, run_id, "FAILED", message))
-        return outcome_of(wait(lambda: client.get_run(run_id)), time.monotonic() - start)
+        wait(lambda: store.end_run(run_id, "FAILED", message))
+        return outcome_of(wait(lambda: store.run(run_id)), time.monotonic() - start)
     finally:
         if evaluator is not None:
             evaluator.close()
-    if wait(lambda: client.get_run(run_id)).info.status == "RUNNING":
-        wait(lambda: client.set_terminated(run_id, "FINISHED"))
+    if wait(lambda: store.status(run_id)) == "RUNNING":
+        wait(lambda: store.end_run(run_id, "FINISHED"))
         # MLflow holds the finished trial's files now; the local copy (checkpoint
         # included) would only double the grid's disk use.
         shutil.rmtree(job.out_dir, ignore_errors=True)
-    return outcome_of(wait(lambda: client.get_run(run_id)), time.monotonic() - start)
+    return outcome_of(wait(lambda: store.run(run_id)), time.monotonic() - start)

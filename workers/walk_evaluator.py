@@ -1,7 +1,9 @@
 """Provides `WalkingEvaluator`: a walking trial's evaluator (fitness F_w, `sim.robot.walk_fitness`).
 
 A batch is evaluated as the path fitnesses are (the 2-D kernel gives every candidate its
-foot path and descriptors), then screened: a candidate that fails the 2-D checks is
+foot path and descriptors, and keeps its decoding and motion, which the 2-D checks and the
+walk model's features read: each candidate is decoded and simulated in 2-D once), then
+screened: a candidate that fails the 2-D checks is
 rejected at no walk's cost; the others are built as their LEGO legs and walked, here or on
 the trial's evaluator actors (`ActorWalkers`), each candidate a task, so that an actor
 that finishes early takes the next. A leg already walked in the trial is not walked
@@ -20,12 +22,14 @@ from typing import Protocol
 
 import numpy as np
 
-from linkevo.sim import decode, simulate
-from linkevo.sim.linkage.evaluating import evaluate
+from linkevo.sim.linkage.decoding import LinkageBatch
+from linkevo.sim.linkage.evaluating import evaluate_with_motion
 from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.genome import validate_genomes
+from linkevo.sim.linkage.kinematics import Motion, simulate, take_rows
 from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.walk_features import features_of
 from linkevo.sim.robot.walk_fitness import (
     CandidateWalk,
     floor_losses,
@@ -33,6 +37,7 @@ from linkevo.sim.robot.walk_fitness import (
     walk_candidate,
 )
 from linkevo.sim.robot.walk_rows import Stage
+from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.evaluators import Bar, Pending
 from linkevo.workers.seed_repertoire import Seed
 from linkevo.workers.walk_log import WalkLog
@@ -141,9 +146,8 @@ class WalkingEvaluator:
             raise RuntimeError("collect the last batch before submitting another")
         self._iteration += 1
         iteration = self._iteration
-        base = evaluate(genomes, "Fp", self.mode, n_angles=self.n_angles)
-        batch = decode(genomes, self.mode)
-        checks = physical_checks(batch, simulate(batch, self.n_angles))
+        base, batch, motion = evaluate_with_motion(genomes, "Fp", self.mode, n_angles=self.n_angles)
+        checks = physical_checks(batch, motion)
         seeded = [self._seeded.get(g.tobytes()) for g in genomes]
         reused = np.array([r is not None for r in seeded])
         built = np.flatnonzero(checks.buildable & ~reused)
@@ -151,7 +155,9 @@ class WalkingEvaluator:
         skipped = np.zeros(0, np.int64)
         if self.surrogate is not None:
             self.surrogate.refresh(self.log)
-            worth = self.surrogate.worth_walking(genomes[built], bars[built])
+            worth = self.surrogate.worth_walking(
+                lambda: self._features(batch, motion, built), bars[built]
+            )
             built, skipped = built[worth], built[~worth]
         known = self.log.known()
         walks = self.walkers.walk(
@@ -183,6 +189,14 @@ class WalkingEvaluator:
 
         self._in_flight = collect
         return collect
+
+    def _features(self, batch: LinkageBatch, motion: Motion, rows: np.ndarray) -> np.ndarray:
+        """The walk model's features of a batch's rows, from the batch's own decoding and
+        motion (simulated again only when the trial's crank angles are not the study's)."""
+        batch = take_rows(batch, rows)
+        if self.n_angles == DEFAULT_ANGLES:
+            return features_of(batch, take_rows(motion, rows))
+        return features_of(batch, simulate(batch, DEFAULT_ANGLES))
 
     def _tally(self, rejected: int, walks: list[CandidateWalk]) -> None:
         counts = self.log.counts

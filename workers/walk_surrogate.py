@@ -19,7 +19,7 @@ resumed trial refits on that many rows and gets the same model.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 
@@ -69,12 +69,17 @@ class WalkSurrogate:
         self.model = WalkModel(len(FEATURE_NAMES)).fit(data, seed=fits) if len(data) else None
         self.fitted_rows, self.fits = rows, fits
 
-    def worth_walking(self, genomes: np.ndarray, bars: np.ndarray) -> np.ndarray:
-        """Returns (N,) which of genomes (N, 56), with the optimizer's bars (N,), to walk:
-        all of them before the first fit."""
-        if self.model is None or not len(genomes):
-            return np.ones(len(genomes), dtype=bool)
-        prediction = self.model.predict(walk_features(genomes, self.mode))
+    def worth_walking(self, features: Callable[[], np.ndarray], bars: np.ndarray) -> np.ndarray:
+        """Returns (N,) which of N candidates, with the optimizer's bars (N,), to walk: all
+        of them before the first fit.
+
+        Args:
+            features: gives the candidates' (N, F) `sim.robot.walk_features`, asked for
+                only once a model is fitted.
+        """
+        if self.model is None or not len(bars):
+            return np.ones(len(bars), dtype=bool)
+        prediction = self.model.predict(features())
         optimistic = prediction.distance + KAPPA * prediction.spread  # (N, 2) cm per 10 s
         loss = -optimistic.min(axis=1)  # the walking fitness: the worse floor
         certain_break = (prediction.p_break >= P_BREAK_SKIP).any(axis=1)

@@ -8,6 +8,7 @@ import signal
 import sys
 from typing import TYPE_CHECKING
 
+from linkevo.orchestrator.commands import options
 from linkevo.orchestrator.commands.options import linkevo_command
 
 if TYPE_CHECKING:
@@ -35,12 +36,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="override a config key with a TOML value, e.g. --set trials=3 "
         '--set \'approaches=["EA","MAP-LIS"]\' (repeatable)',
     )
-    grid.add_argument(
-        "--tracking-uri",
-        help="MLflow tracking URI (http://host:port, sqlite:///abs/path.db) or a folder for "
+    options.tracking_uri(
+        grid,
+        "MLflow tracking URI (http://host:port, sqlite:///abs/path.db) or a folder for "
         "an embedded store; default: config key tracking_uri, MLFLOW_TRACKING_URI, runs/",
     )
-    grid.add_argument("--address", help="Ray address (default: RAY_ADDRESS, else start one)")
+    options.ray_address(grid)
     grid.add_argument(
         "--resume",
         action="store_true",
@@ -145,7 +146,7 @@ def _ui_flag(uri: str) -> list[str]:
 
 def describe(grid: Grid, cluster: Cluster) -> str:
     """Returns the dry-run text: resolved config, grid id, reservation and every trial."""
-    from linkevo.orchestrator.config_text import to_toml
+    from linkevo.orchestrator.config import to_toml
     from linkevo.orchestrator.reservation import Reservation
 
     cfg = grid.config

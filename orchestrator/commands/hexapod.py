@@ -53,9 +53,7 @@ def _register_walk(sub: argparse._SubParsersAction) -> None:
         "--linkage", default=None, help="with --emulate physics: RUN_ID[:CELL] or FILE.json"
     )
     options.floor(walk)
-    walk.add_argument(
-        "--seconds", type=positive_seconds, required=True, help="walking time in seconds"
-    )
+    options.seconds(walk, "walking time in seconds", required=True)
     walk.add_argument("--telemetry", type=Path, default=None, help="CSV file, one row per tick")
     walk.set_defaults(func=walk_handler)
 
@@ -70,9 +68,7 @@ def _register_trial(sub: argparse._SubParsersAction) -> None:
     trial.add_argument("--floor", required=True, type=floor_name, help="the floor's name")
     options.robot(trial)
     options.repeats(trial)
-    trial.add_argument(
-        "--seconds", type=positive_seconds, default=options.WALK_SECONDS, help="seconds per walk"
-    )
+    options.seconds(trial, "seconds per walk")
     trial.add_argument(
         "--distance-cm",
         type=float,
@@ -99,17 +95,6 @@ def _register_table(sub: argparse._SubParsersAction) -> None:
 EMULATORS = ("bus", "physics")
 """What `hexapod walk --emulate` runs against: the bus emulator's motors alone, or as the
 cranks of the robot simulated in MuJoCo."""
-
-
-def positive_seconds(text: str) -> float:
-    """Returns a real walk's length in seconds, a finite number > 0."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"{text!r} is not allowed: a positive number of seconds")
-    return value
 
 
 def floor_name(text: str) -> str:
@@ -240,6 +225,7 @@ def trial_handler(args: argparse.Namespace) -> int:
     """Walks the repeats, records the distances and logs a field-trial MLflow run."""
     from linkevo.hardware.errors import HardwareError, StopRequested
     from linkevo.hardware.field_trial import log_field_trial, walk_repeats
+    from linkevo.workers.store import run_layout as layout
     from linkevo.workers.store.linkages import LinkageRef, load_source
     from linkevo.workers.store.runs import RunStore
     from linkevo.workers.store.tracking import resolve_tracking_uri
@@ -279,10 +265,10 @@ def trial_handler(args: argparse.Namespace) -> int:
             print(f"linkevo hexapod trial: {exc}; nothing logged", file=sys.stderr)
             return 1
         params = {
-            "seconds": str(args.seconds),
+            layout.SECONDS: str(args.seconds),
             "repeats": str(args.repeats),
             "config": str(args.config or options.ROBOT_CONFIG),
-            "simulated": str(args.emulate),  # the stored param's name (docs/hardware.md)
+            layout.SIMULATED: str(args.emulate),  # the stored param's name (docs/hardware.md)
         }
         run_id = log_field_trial(
             uri,

@@ -32,9 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     options.repeats(simulate)
     options.robot(simulate)
     options.robot_model(simulate)
-    simulate.add_argument(
-        "--seed", type=options.count(0, 2**31), default=0, help="seeds the start's perturbation"
-    )
+    options.seed(simulate, "seeds the start's perturbation")
     simulate.add_argument("--json", action="store_true", help="print one JSON object")
     simulate.add_argument(
         "--out",

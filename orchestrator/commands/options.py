@@ -1,7 +1,8 @@
 """Provides the options several commands share, each declared and checked once: the store
 (`--tracking-uri`, `--experiment`), a walk's `--seconds`, `--floor` (from
-`sim.robot.hexapod.FLOORS`), Ray's `--address`, the robot's `--config`; and `linkevo_command`,
-how to run linkevo again as this process was run (for the lines that resume a command).
+`sim.robot.hexapod.FLOORS`), Ray's `--address`, the robot's `--config`, a search's `--mode`,
+`--seed` and `--target`; and `linkevo_command`, how to run linkevo again as this process
+was run (for the lines that resume a command).
 
 A value an option refuses stops the command in argparse, before anything starts, with the
 value and what is allowed (exit 2).
@@ -16,13 +17,15 @@ import sys
 from pathlib import Path
 
 from linkevo.sim.robot.hexapod import FLAT, FLOORS, ROBOT_MODELS, WALK_SECONDS
-from linkevo.sim.study import ROBOTS
+from linkevo.sim.study import MODES, ROBOTS, TARGETS
 from linkevo.workers.store.tracking import DEFAULT_EXPERIMENT
 
 MAX_SECONDS = 600.0
 """The longest walk a command takes (ten minutes of simulated walking)."""
 MAX_REPEATS = 100
 """The most walks per robot and floor a command takes."""
+MAX_SEED = 2**32 - 1
+"""The largest seed a command takes (a grid's trial seeds are 32-bit)."""
 ROBOT_CONFIG = "configs/hexapod.toml"
 """The robot config when `--config` is not given: the one linkevo ships (`linkevo.configs`)."""
 
@@ -35,14 +38,49 @@ __all__ = [
 ]
 
 
+def tracking_uri(
+    parser: argparse.ArgumentParser,
+    what: str = "MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
+) -> None:
+    """Adds `--tracking-uri` (checked where the store is opened: `workers.store.tracking`)."""
+    parser.add_argument("--tracking-uri", default=None, help=what)
+
+
 def store(parser: argparse.ArgumentParser) -> None:
     """Adds `--tracking-uri` and `--experiment`."""
-    parser.add_argument(
-        "--tracking-uri",
-        default=None,
-        help="MLflow tracking URI (default: MLFLOW_TRACKING_URI, else runs/mlflow.db)",
-    )
+    tracking_uri(parser)
     parser.add_argument("--experiment", default=DEFAULT_EXPERIMENT, help="MLflow experiment")
+
+
+def mode(parser: argparse.ArgumentParser, default: str | None = MODES[0], what: str = "") -> None:
+    """Adds `--mode`, one of `sim.study.MODES`."""
+    what = what or f"the spec's mode: {', '.join(MODES)}"
+    parser.add_argument("--mode", choices=MODES, default=default, help=what)
+
+
+def seed(parser: argparse.ArgumentParser, what: str = "random seed") -> None:
+    """Adds `--seed`: an integer in [0, `MAX_SEED`] (default 0)."""
+    parser.add_argument("--seed", type=count(0, MAX_SEED), default=0, help=what)
+
+
+def target_name(text: str) -> str:
+    """Returns an F_p target: a published name (`sim.study.TARGETS`) or a .json file that
+    exists (read and checked by `workers.evaluators.resolve_target`).
+
+    Raises:
+        argparse.ArgumentTypeError: naming the value and what is allowed.
+    """
+    if text in TARGETS or (text.endswith(".json") and Path(text).is_file()):
+        return text
+    raise argparse.ArgumentTypeError(
+        f"{text!r} is not allowed: {', '.join(TARGETS)} or an existing .json target file"
+    )
+
+
+def target(parser: argparse.ArgumentParser) -> None:
+    """Adds `--target`: the F_p target (`target_name`)."""
+    what = f"F_p target: {', '.join(TARGETS)} or a JSON file"
+    parser.add_argument("--target", type=target_name, default=TARGETS[0], help=what)
 
 
 def walk_seconds(text: str) -> float:

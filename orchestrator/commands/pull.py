@@ -225,7 +225,7 @@ def _print_cells(store: RunStore, ref, top: int, buildable: bool) -> int:
         raise CliError(f"--list {top}: give the number of cells to list, >= 1")
     if ref.cell is not None or ref.bins is not None:
         raise CliError("--list takes a run id (RUN_ID), not a cell")
-    mode = store.client.get_run(ref.run_id).data.params.get("mode", "paper")
+    mode = store.params(ref.run_id).get("mode", "paper")
     table = list_cells(store, ref.run_id, top, mode, buildable)
     if table.empty:
         print(f"run {ref.run_id}: no {'buildable ' if buildable else ''}cell")

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 from linkevo.sim.study import DEFAULT_ANGLES, MIN_ANGLES, MODES, PATH_FITNESSES
 
 if TYPE_CHECKING:
@@ -22,8 +23,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     ev.add_argument("genomes", type=Path, help="a .npy file holding an (N, 56) float array")
     ev.add_argument("--fitness", choices=PATH_FITNESSES, default="Fp", help="loss to compute")
-    ev.add_argument("--mode", choices=MODES, default="paper", help="spec mode")
-    ev.add_argument("--target", default="D16", help="D16 (default), D24 or a JSON target file")
+    options.mode(ev)
+    options.target(ev)
     ev.add_argument(
         "--angles",
         type=int,
@@ -39,7 +40,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="Draw a linkage document (.json) or one row of a genome file (.npy[:ROW]).",
     )
     show.add_argument("source", help="LINKAGE.json or GENOMES.npy[:ROW] (row 0 by default)")
-    show.add_argument("--mode", choices=MODES, default=None, help="for .npy input (default paper)")
+    options.mode(show, None, f"for .npy input: {', '.join(MODES)} (default paper)")
     show.add_argument(
         "--angles",
         type=int,

@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 from linkevo.sim.study import (
     APPROACHES,
     CANDIDATES_PER_WALK,
@@ -17,7 +18,6 @@ from linkevo.sim.study import (
     DEFAULT_BATCH,
     DEFAULT_WALK_BATCH,
     MIN_ANGLES,
-    MODES,
     SINGLE_FITNESSES,
     WALKING_FITNESS,
 )
@@ -71,11 +71,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         help=f"children per iteration (default: {DEFAULT_BATCH}; Fw: {DEFAULT_WALK_BATCH})",
     )
-    parser.add_argument("--mode", default="paper", help=f"one of {', '.join(MODES)}")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (>= 0)")
+    options.mode(parser)
+    options.seed(parser)
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="output folder")
     parser.add_argument("--resume", action="store_true", help="continue from DIR's checkpoint")
-    parser.add_argument("--target", default="D16", help="F_p target: D16, D24 or a JSON file")
+    options.target(parser)
     parser.add_argument(
         "--n-angles",
         type=int,

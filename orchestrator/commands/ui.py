@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from linkevo.orchestrator.cli import CliError
+from linkevo.orchestrator.commands import options
 
 APP = "linkevo"
 """The MLflow app plugin the UI runs (`orchestrator.ui_app`: MLflow's own app, every trial
@@ -28,9 +29,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "named with its address instead of a second server."
         ),
     )
-    ui.add_argument(
-        "--tracking-uri",
-        help="store to browse (default: MLFLOW_TRACKING_URI, else the embedded runs/ store)",
+    options.tracking_uri(
+        ui, "store to browse (default: MLFLOW_TRACKING_URI, else the embedded runs/ store)"
     )
     ui.add_argument("--port", type=int, default=5000, help="loopback port of the UI")
     ui.set_defaults(func=run_ui)
@@ -51,9 +51,8 @@ def serving(uri: str) -> tuple[int, int] | None:
 def run_ui(args: argparse.Namespace) -> int:
     """Runs `mlflow ui` on the store, bound to 127.0.0.1, until Ctrl-C or SIGTERM, which
     stop the server with it; killed outright, it takes the server with it too."""
-    from mlflow.tracking import MlflowClient
-
     from linkevo.orchestrator.process_sessions import in_use, stop_session, stop_with_parent
+    from linkevo.workers.store.runs import RunStore
     from linkevo.workers.store.tracking import (
         DEFAULT_EXPERIMENT,
         artifact_root_for,
@@ -71,7 +70,7 @@ def run_ui(args: argparse.Namespace) -> int:
         )
     require_store(uri)
     experiment_id = None
-    if MlflowClient(tracking_uri=uri).get_experiment_by_name(DEFAULT_EXPERIMENT) is not None:
+    if RunStore(uri, DEFAULT_EXPERIMENT).has_experiment:
         experiment_id = ensure_experiment(uri)  # brings an older store's view up to date
     running = serving(uri)
     if running is not None:

@@ -63,7 +63,12 @@ def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo walkmap`."""
     from tqdm import tqdm
 
-    from linkevo.orchestrator.walkmap import Selection, check_before_walking, run_on_ray, walk_map
+    from linkevo.orchestrator.repertoire_walks import (
+        Selection,
+        check_before_walking,
+        run_on_ray,
+        walk_map,
+    )
     from linkevo.workers.store.runs import RunStore
 
     selection = Selection.parse(args.cells)

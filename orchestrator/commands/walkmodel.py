@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="share of the repertoires held out to measure the model, at least one; 0 "
         "learns from all, unmeasured",
     )
-    fit.add_argument("--seed", type=options.count(0, 2**31 - 1), default=0, help="seed")
+    options.seed(fit, "seeds the hold-out and the fit")
     fit.add_argument("--json", action="store_true", help="print the figures as JSON")
     options.store(fit)
     fit.set_defaults(func=fit_handler)
@@ -82,7 +82,7 @@ def holdout_share(text: str) -> float:
 
 def fit_handler(args: argparse.Namespace) -> int:
     """Handles `linkevo walkmodel fit`."""
-    from linkevo.orchestrator.walkmodel import describe, fit, log_model, walked_repertoires
+    from linkevo.orchestrator.walk_model_runs import describe, fit, log_model, walked_repertoires
     from linkevo.workers.store.runs import RunStore
 
     store = RunStore.open(args.tracking_uri, args.experiment)
@@ -114,7 +114,7 @@ def fit_handler(args: argparse.Namespace) -> int:
 
 def predict_handler(args: argparse.Namespace) -> int:
     """Handles `linkevo walkmodel predict`."""
-    from linkevo.orchestrator.walkmodel import load_model, predict
+    from linkevo.orchestrator.walk_model_runs import load_model, predict
     from linkevo.workers.store.runs import RunStore
 
     store = RunStore.open(args.tracking_uri, args.experiment)

@@ -16,8 +16,7 @@ from pathlib import Path
 import pandas as pd
 from matplotlib import rc_context
 
-from linkevo.orchestrator.config import ConfigError, from_dict
-from linkevo.orchestrator.config_text import to_toml
+from linkevo.orchestrator.config import ConfigError, from_dict, to_toml
 from linkevo.orchestrator.report import figures as fig
 from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
 from linkevo.orchestrator.report.findings import MEASURES, check_findings
@@ -26,7 +25,9 @@ from linkevo.orchestrator.report.load import GridData, load_grid
 from linkevo.orchestrator.report.measures import best_path_sizes, trial_measures
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
 from linkevo.orchestrator.report.verdicts import Finding
+from linkevo.sim.errors import LinkevoError
 from linkevo.workers.store.artifacts import write_bytes_atomic
+from linkevo.workers.store.runs import RunStore
 
 REPORT_ARTIFACT_DIR = "report"
 
@@ -148,12 +149,10 @@ def build_report(
     files = [out / path.name for path in written]
     html_path = out / "report.html"
     if log_to_mlflow:
-        from mlflow.tracking import MlflowClient
-
-        client = MlflowClient(tracking_uri=tracking_uri)
+        store = RunStore(tracking_uri)
         try:
             for path in files:
-                client.log_artifact(grid.parent_run_id, str(path), report_folder(first_trials))
+                store.log_artefact(grid.parent_run_id, path, report_folder(first_trials))
         except Exception as exc:
             raise ReportNotLogged(
                 f"the report is complete in {out}, but logging it to parent run "
@@ -172,7 +171,7 @@ def build_report(
     )
 
 
-class ReportNotLogged(RuntimeError):
+class ReportNotLogged(LinkevoError, RuntimeError):
     """The report's folder is written, its logging to MLflow failed; says where it is."""
 
 

@@ -8,7 +8,6 @@ from collections.abc import Iterable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from urllib.parse import unquote, urlparse
 
 import numpy as np
 import pandas as pd
@@ -103,11 +102,10 @@ def load_grid(
     back to its logged metric histories.
     """
     store = RunStore(tracking_uri, experiment)
-    client = store.client
     grid_id, parent_id = store.grid(grid_id)
     runs = store.trial_table(grid_id)
-    parent = client.get_run(parent_id)
-    config = _grid_config(parent, cache_dir, tracking_uri)
+    parent = store.run(parent_id)
+    config = _grid_config(store, parent, cache_dir)
     runs = latest_per_trial(runs)
     if first_trials is not None and len(runs):
         index = pd.to_numeric(runs.get(f"tags.{layout.TRIAL_INDEX}"), errors="coerce")
@@ -116,7 +114,7 @@ def load_grid(
     with ThreadPoolExecutor(DOWNLOAD_THREADS) as pool:
         fetched = list(
             pool.map(
-                lambda row: _fetch_trial(client, row, cache_dir, tracking_uri),
+                lambda row: _fetch_trial(store, row, cache_dir),
                 [row for _, row in runs.iterrows()],
             )
         )
@@ -136,65 +134,41 @@ def load_grid(
     )
 
 
-def _grid_config(parent, cache_dir: Path, tracking_uri: str) -> dict:
+def _grid_config(store: RunStore, parent, cache_dir: Path) -> dict:
     """Returns the parent run's `grid_config.json` ({} when the run has none)."""
     name = layout.GRID_CONFIG_JSON
-    path = _artefact(parent.info.artifact_uri, name, cache_dir / "grid", tracking_uri)
+    path = store.artefact_at(parent.info.artifact_uri, name, cache_dir / "grid")
     return json.loads(path.read_text()) if path is not None else {}
 
 
 def _fetch_trial(
-    client, row: pd.Series, cache_dir: Path, tracking_uri: str
+    store: RunStore, row: pd.Series, cache_dir: Path
 ) -> tuple[pd.DataFrame, Path | None, Path | None]:
     """Returns (metric history, local archive path, local best-linkage path) of one trial
     run; a path is None where the run has no such file."""
     folder = cache_dir / row.run_id
-    csv = _artefact(row.artifact_uri, layout.METRICS_FILE, folder, tracking_uri)
-    history = pd.read_csv(csv) if csv is not None else _history_from_metrics(client, row)
+    csv = store.artefact_at(row.artifact_uri, layout.METRICS_FILE, folder)
+    history = pd.read_csv(csv) if csv is not None else _history_from_metrics(store, row)
     archive = None
     for name in ARCHIVE_FILES:
-        archive = _artefact(row.artifact_uri, name, folder, tracking_uri)
+        archive = store.artefact_at(row.artifact_uri, name, folder)
         if archive is not None:
             break
-    return history, archive, _artefact(row.artifact_uri, layout.BEST_JSON, folder, tracking_uri)
+    return history, archive, store.artefact_at(row.artifact_uri, layout.BEST_JSON, folder)
 
 
-def _history_from_metrics(client, row: pd.Series) -> pd.DataFrame:
+def _history_from_metrics(store: RunStore, row: pd.Series) -> pd.DataFrame:
     """Returns a trial's history from its logged metrics (step = iteration)."""
     names = [c.removeprefix("metrics.") for c in row.index if c.startswith("metrics.")]
     series = {}
     for name in names:
         if name in HISTORY_COLUMNS and name != "iteration" and pd.notna(row[f"metrics.{name}"]):
-            points = client.get_metric_history(row.run_id, name)
-            series[name] = pd.Series({m.step: m.value for m in points}, dtype=float)
+            points = store.metric_history(row.run_id, name)
+            series[name] = pd.Series(points, dtype=float)
     if not series:
         return pd.DataFrame(columns=["iteration"])
     table = pd.DataFrame(series).sort_index()
     return table.rename_axis("iteration").reset_index()
-
-
-def _artefact(artifact_uri: str, name: str, folder: Path, tracking_uri: str) -> Path | None:
-    """Returns a local path to artefact `name` of a run, or None when it has none.
-
-    A `file:` artefact root is read in place; any other is downloaded into `folder`
-    (a server's proxied `mlflow-artifacts:` root through `tracking_uri`).
-    """
-    parsed = urlparse(artifact_uri)
-    if parsed.scheme in ("file", ""):
-        path = Path(unquote(parsed.path)) / name
-        return path if path.is_file() else None
-    from mlflow.artifacts import download_artifacts
-    from mlflow.exceptions import MlflowException
-
-    folder.mkdir(parents=True, exist_ok=True)
-    try:
-        return Path(
-            download_artifacts(
-                artifact_uri=f"{artifact_uri}/{name}", dst_path=folder, tracking_uri=tracking_uri
-            )
-        )
-    except (MlflowException, OSError):
-        return None
 
 
 def _trial_table(

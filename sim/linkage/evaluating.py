@@ -1,14 +1,16 @@
-"""Provides `evaluate`: decode, simulate and score a batch of genomes in one kernel."""
+"""Provides `evaluate`: decode, simulate and score a batch of genomes in one kernel (and
+`evaluate_with_motion`, which keeps the decoding and motion it computed)."""
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 
 import numba
 import numpy as np
 
 from linkevo.sim.linkage import kernels
-from linkevo.sim.linkage.decoding import check_mode
+from linkevo.sim.linkage.decoding import LinkageBatch, check_mode
 from linkevo.sim.linkage.evaluation import Evaluation, field_shapes
 from linkevo.sim.linkage.fitness import (
     FITNESS_CODES,
@@ -17,8 +19,8 @@ from linkevo.sim.linkage.fitness import (
     check_fitness,
     named_target,
 )
-from linkevo.sim.linkage.genome import validate_genomes
-from linkevo.sim.linkage.kinematics import check_angles
+from linkevo.sim.linkage.genome import MAX_BEAMS, N_NODES, validate_genomes
+from linkevo.sim.linkage.kinematics import Motion, check_angles
 from linkevo.sim.study import DEFAULT_ANGLES
 
 
@@ -47,6 +49,25 @@ def evaluate(
             mode, n_angles < MIN_ANGLES or an `out` of the wrong layout; raised before any work
             starts.
     """
+    return _evaluate(genomes, fitness, mode, target, n_angles, out, keep=False)[0]
+
+
+def evaluate_with_motion(
+    genomes: np.ndarray,
+    fitness: str = "Fp",
+    mode: str = "paper",
+    target: Target | str | None = None,
+    n_angles: int = DEFAULT_ANGLES,
+) -> tuple[Evaluation, LinkageBatch, Motion]:
+    """Returns the Evaluation of genomes (N, 56) with their decoding and motion, from the one
+    kernel pass: the same, bit for bit, as `decode(genomes, mode)` and `simulate(batch,
+    n_angles)` give, for a caller that reads all three (a walking trial's batch); arguments
+    and errors as `evaluate`'s."""
+    evaluation, kept = _evaluate(genomes, fitness, mode, target, n_angles, None, keep=True)
+    return evaluation, *kept
+
+
+def _evaluate(genomes, fitness, mode, target, n_angles, out, *, keep: bool):
     legacy = check_mode(mode)
     check_fitness(fitness)
     n_angles = check_angles(n_angles)
@@ -61,6 +82,22 @@ def evaluate(
         out = Evaluation.empty(n, n_angles, n_obj)
     else:
         check_out(out, n, n_angles, n_obj, genomes)
+    size = n if keep else 0
+    batch = LinkageBatch(
+        mode=mode,
+        node_int=np.empty((size, N_NODES, 4), np.int64),
+        node_float=np.empty((size, N_NODES, 5)),
+        beam_int=np.empty((size, MAX_BEAMS, 6), np.int64),
+        beam_length=np.empty((size, MAX_BEAMS)),
+        n_beams=np.empty(size, np.int64),
+        positions0=np.empty((size, N_NODES, 2)),
+    )
+    motion = Motion(
+        positions=np.empty((size, N_NODES, n_angles, 2)),
+        valid=out.valid if keep else np.empty((0, n_angles), np.bool_),
+        beam_angles=np.full((size, MAX_BEAMS, n_angles), np.nan),
+        foot=out.foot if keep else np.empty(0, np.int64),
+    )
     if n:
         d = out.descriptors
         kernels.evaluate_batch(
@@ -81,8 +118,19 @@ def evaluate(
             d["MAP-WH"],
             d["MAP-LIS"],
             d["MAP-ST"],
+            keep,
+            batch.node_int,
+            batch.node_float,
+            batch.beam_int,
+            batch.beam_length,
+            batch.n_beams,
+            batch.positions0,
+            motion.positions,
+            motion.beam_angles,
         )
-    return out
+    if keep:  # the motion's own copies: a caller may change the evaluation
+        motion = dataclasses.replace(motion, valid=out.valid.copy(), foot=out.foot.copy())
+    return out, (batch, motion)
 
 
 def check_out(

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage import reference
 from linkevo.sim.linkage.decoding import LinkageBatch, decode, with_lengths
 from linkevo.sim.linkage.fitness import named_target
@@ -35,7 +36,7 @@ same angles, bit for bit, as the whole turn's): the closest there is the closest
 turn for 142 of 150 study linkages, and 1.2 mm further at most for the others."""
 
 
-class QuantiseError(ValueError):
+class QuantiseError(LinkevoError, ValueError):
     """No whole-module rounding of the linkage turns fully; the message says how close any came."""
 
 

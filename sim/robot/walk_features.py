@@ -34,8 +34,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from linkevo.sim.linkage.decoding import decode
-from linkevo.sim.linkage.kinematics import simulate
+from linkevo.sim.linkage.decoding import LinkageBatch, decode
+from linkevo.sim.linkage.kinematics import Motion, simulate
 from linkevo.sim.linkage.physical import physical_checks, quiet_all_nan
 from linkevo.sim.robot.builds import lego_builds
 from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status, credited_cm
@@ -88,15 +88,21 @@ FEATURE_NAMES: tuple[str, ...] = (
 """The columns of `walk_features`, in order."""
 
 
-@quiet_all_nan
 def walk_features(genomes: np.ndarray, mode: str = "paper") -> np.ndarray:
     """Returns (N, len(FEATURE_NAMES)) float32 features of genomes (N, 56) in `mode`."""
     genomes = np.asarray(genomes, dtype=np.float64).reshape(-1, 56)
-    n = len(genomes)
+    evolved = decode(genomes, mode)
+    return features_of(evolved, simulate(evolved, DEFAULT_ANGLES))
+
+
+@quiet_all_nan
+def features_of(evolved: LinkageBatch, before: Motion) -> np.ndarray:
+    """Returns `walk_features` of decoded linkages (N) from their motion at the study's
+    `DEFAULT_ANGLES` (a caller that has both, a walking trial's batch, decodes and
+    simulates once)."""
+    n = len(evolved)
     if not n:
         return np.zeros((0, len(FEATURE_NAMES)), np.float32)
-    evolved = decode(genomes, mode)
-    before = simulate(evolved, DEFAULT_ANGLES)
     batch, built = lego_builds(evolved, before)
     motion = simulate(batch, DEFAULT_ANGLES)
     checks = physical_checks(batch, motion, rigid=built)

@@ -194,7 +194,7 @@ def walk_rows(
 
     Args:
         run: runs a function over items and yields each result as it ends (here, or as
-            Ray tasks: `orchestrator.walkmap`).
+            Ray tasks: `orchestrator.repertoire_walks`).
         batches: the cells.
         seconds: each walk's length.
         legs_per_task: distinct legs per walk task.

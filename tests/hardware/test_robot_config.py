@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from linkevo.hardware.config import load_config, parse_config
-from linkevo.hardware.errors import ConfigError
+from linkevo.sim.errors import ConfigError
 from tests.helpers.hexapod import raw_config, toml_text
 
 REPO = Path(__file__).resolve().parents[2]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from mlflow.tracking import MlflowClient
 
-from linkevo.orchestrator import config, config_text
+from linkevo.orchestrator import config
 from linkevo.orchestrator.grid import Grid
 
 TINY = {
@@ -28,7 +28,7 @@ def tiny_config_file(tmp_path: Path, **changes: object) -> Path:
     """Writes the tiny grid (with `changes`) as TOML and returns its path."""
     cfg = config.from_dict({**TINY, **changes})
     path = tmp_path / "tiny.toml"
-    path.write_text(config_text.to_toml(cfg))
+    path.write_text(config.to_toml(cfg))
     return path
 
 

@@ -13,12 +13,13 @@ import pytest
 
 from linkevo import sim
 from linkevo.hardware.config import load_config
-from linkevo.hardware.field_trial import PHYSICS, REAL, log_field_trial
+from linkevo.hardware.field_trial import log_field_trial
 from linkevo.orchestrator.calibration import FieldTrial, simulated_cm, with_values
 from linkevo.orchestrator.cli import main
 from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.workers.store.linkages import SourceLinkage
+from linkevo.workers.store.run_layout import PHYSICS, REAL
 from linkevo.workers.store.tracking import ensure_experiment
 
 HIDDEN_SPEED_RPM = 19.0

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from linkevo.orchestrator import config, config_text
+from linkevo.orchestrator import config
 from linkevo.orchestrator.config import ConfigError, GridConfig
 
 CONFIGS = Path(__file__).resolve().parents[2] / "configs"
@@ -53,7 +53,7 @@ def test_resolved_toml_reads_back_to_an_equal_config(tmp_path):
         write(tmp_path, 'trials = 3\nfitnesses = ["Fsl"]\n[options.MAP-AU]\nepochs = 5\n'),
         ["max_seconds=12.5"],
     )
-    again = config.load(write(tmp_path, config_text.to_toml(cfg)))
+    again = config.load(write(tmp_path, config.to_toml(cfg)))
     assert again == cfg
 
 
@@ -102,7 +102,7 @@ def test_identity_leaves_out_the_trial_count_so_a_grid_can_grow():
 
 
 def test_flatten_turns_tables_into_dotted_params():
-    assert config_text.flatten({"a": 1, "options": {"b": [1, 2]}}) == {
+    assert config.flatten({"a": 1, "options": {"b": [1, 2]}}) == {
         "a": "1",
         "options.b": "[1, 2]",
     }

@@ -11,10 +11,9 @@ import pandas as pd
 import pytest
 
 from linkevo.hardware.config import parse_config
-from linkevo.hardware.errors import ConfigError
 from linkevo.orchestrator.cli import main
-from linkevo.orchestrator.config import ConfigError as GridConfigError
 from linkevo.orchestrator.config import GridConfig
+from linkevo.sim.errors import ConfigError
 from linkevo.sim.robot.hexapod import FLOORS, Frame, Motor, Physics
 from linkevo.workers.trial_spec import TrialSpec, TrialSpecError
 
@@ -49,7 +48,7 @@ def test_a_grid_and_a_trial_carry_their_robot():
     assert "physics" not in GridConfig(**walking).identity()
     heavy = GridConfig(**walking, physics={"frame_mass_kg": 2.5})
     assert heavy.identity()["physics"] == {"frame_mass_kg": 2.5}
-    with pytest.raises(GridConfigError, match="unknown key\\(s\\) \\['mass'\\]"):
+    with pytest.raises(ConfigError, match="unknown key\\(s\\) \\['mass'\\]"):
         GridConfig(**walking, physics={"mass": 2.5})
     with pytest.raises(TrialSpecError, match=r"physics carpet_friction = 9\.0 is out of range"):
         TrialSpec.walking("MAP-LIS", 4, physics={"carpet_friction": 9.0})

@@ -13,7 +13,7 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.cli import main
-from linkevo.orchestrator.walkmap import Selection, run_in_process, walk_map
+from linkevo.orchestrator.repertoire_walks import Selection, run_in_process, walk_map
 from linkevo.sim.robot.walk_map import build_cells
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial_spec import TrialSpec

@@ -65,7 +65,10 @@ def test_cli_passes_approach_options(tmp_path: Path, capsys: pytest.CaptureFixtu
             ["--evaluations", "-10"],
             "evaluations must be an integer >= the batch size (100), got -10",
         ),
-        (["--mode", "fast"], "unknown mode 'fast'; allowed: paper, legacy"),
+        (
+            ["--mode", "fast"],
+            "argument --mode: invalid choice: 'fast' (choose from 'paper', 'legacy')",
+        ),
         (["--option", "colour=3"], "unknown option(s) 'colour' for EA; allowed: coverage_space"),
         (["--option", "oops"], "--option 'oops' must look like KEY=VALUE"),
     ],

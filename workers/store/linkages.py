@@ -74,11 +74,11 @@ def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
         LinkageError: unknown run, or a cell not in the repertoire.
         NotFound: the run lacks the artefact (its best linkage or repertoire).
     """
-    from mlflow.exceptions import MlflowException
+    from linkevo.workers.store.runs import NotFound
 
     try:
-        run = store.client.get_run(ref.run_id)
-    except MlflowException as exc:
+        run = store.run(ref.run_id)
+    except NotFound as exc:
         raise LinkageError(f"--linkage: no MLflow run with id {ref.run_id!r}") from exc
     tags = run.data.tags
     with tempfile.TemporaryDirectory() as tmp:

@@ -17,6 +17,8 @@ import urllib.request
 from collections.abc import Callable
 from typing import TypeVar
 
+from linkevo.sim.errors import LinkevoError
+
 OUTAGE_LIMIT_S = 300.0
 """How long a tracking server may stay silent before the grid stops (default of the
 config key `server_outage_s`)."""
@@ -32,7 +34,7 @@ try again later."""
 T = TypeVar("T")
 
 
-class ServerLost(RuntimeError):
+class ServerLost(LinkevoError, RuntimeError):
     """The tracking server did not answer for longer than the limit; says which and since
     when."""
 

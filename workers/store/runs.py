@@ -1,10 +1,12 @@
-"""Provides `RunStore`: every question linkevo asks of an MLflow store, in one typed API.
+"""Provides `RunStore`: every call linkevo makes to an MLflow store, in one typed API.
 
 A command opens the store once (`RunStore.open`) and asks it for a grid's parent run, its
 trial runs (as runs, or as one table), the repertoire trials a reference names, a run's
-artefacts read back and checked (`workers.store.tables`). The searches page through all
-results and quote every value they put in a filter (`run_layout.where`). Optuna's
-storages, one object behind every study's reads, are the model.
+artefacts read back and checked (`workers.store.tables`); and writes through it: runs
+created and ended, their tags, params, metrics and artefacts, the experiment's tags (the
+leases). The searches page through all results and quote every value they put in a filter
+(`run_layout.where`). No other module holds an MLflow client. Optuna's storages, one
+object behind every study's reads and writes, are the model.
 """
 
 from __future__ import annotations
@@ -68,8 +70,26 @@ class RunStore:
 
         self.uri = uri
         self.experiment = experiment
-        self.client: MlflowClient = MlflowClient(tracking_uri=uri)
+        self._client: MlflowClient = MlflowClient(tracking_uri=uri)
         self._experiment_id = experiment_id
+
+    @classmethod
+    def of_experiment(cls, uri: str, experiment_id: str) -> RunStore:
+        """Returns the store at an absolute `uri` in the experiment with that id (created
+        in an older store as `tracking.ensure_experiment` would, with its tags).
+
+        Raises:
+            NotFound: the store has no experiment of that id.
+        """
+        from mlflow.exceptions import MlflowException
+
+        from linkevo.workers.store.tracking import ensure_experiment
+
+        try:
+            name = cls(uri, experiment_id=experiment_id)._client.get_experiment(experiment_id).name
+        except MlflowException as exc:
+            raise NotFound(f"no MLflow experiment {experiment_id!r} in the store {uri}") from exc
+        return cls(uri, name, experiment_id=ensure_experiment(uri, name))
 
     @classmethod
     def open(cls, uri: str | None = None, experiment: str = "linkevo") -> RunStore:
@@ -91,11 +111,119 @@ class RunStore:
             NotFound: the store has no such experiment.
         """
         if self._experiment_id is None:
-            found = self.client.get_experiment_by_name(self.experiment)
+            found = self._client.get_experiment_by_name(self.experiment)
             if found is None:
                 raise NotFound(f"no MLflow experiment {self.experiment!r} in the store {self.uri}")
             self._experiment_id = found.experiment_id
         return self._experiment_id
+
+    @property
+    def has_experiment(self) -> bool:
+        """Whether the store holds the experiment."""
+        return self._client.get_experiment_by_name(self.experiment) is not None
+
+    def experiment_tag(self, name: str) -> str | None:
+        """Returns the experiment's tag `name`, or None."""
+        return self._client.get_experiment(self.experiment_id).tags.get(name)
+
+    def set_experiment_tag(self, name: str, value: str) -> None:
+        """Sets the experiment's tag `name`."""
+        self._client.set_experiment_tag(self.experiment_id, name, value)
+
+    def delete_experiment_tag(self, name: str) -> None:
+        """Deletes the experiment's tag `name`."""
+        self._client.delete_experiment_tag(self.experiment_id, name)
+
+    def run(self, run_id: str) -> Run:
+        """Returns a run.
+
+        Raises:
+            NotFound: the store has no such run.
+        """
+        from mlflow.exceptions import MlflowException
+
+        try:
+            return self._client.get_run(run_id)
+        except MlflowException as exc:
+            raise NotFound(f"no run {run_id!r} in the store {self.uri}") from exc
+
+    def tags(self, run_id: str) -> dict[str, str]:
+        """Returns a run's tags (NotFound as `run`)."""
+        return dict(self.run(run_id).data.tags)
+
+    def params(self, run_id: str) -> dict[str, str]:
+        """Returns a run's params (NotFound as `run`)."""
+        return dict(self.run(run_id).data.params)
+
+    def status(self, run_id: str) -> str:
+        """Returns a run's status: RUNNING, FINISHED, FAILED or KILLED (NotFound as `run`)."""
+        return self.run(run_id).info.status
+
+    def metric_history(self, run_id: str, name: str) -> dict[int, float]:
+        """Returns a run's values of metric `name` by step, in step order (a step logged
+        twice: its latest value)."""
+        history = self._client.get_metric_history(run_id, name)
+        return {m.step: m.value for m in sorted(history, key=lambda m: (m.step, m.timestamp))}
+
+    def artefact_names(self, run_id: str) -> set[str]:
+        """Returns the names of a run's top-level artefacts (files and folders)."""
+        return {a.path for a in self._client.list_artifacts(run_id)}
+
+    def create_run(
+        self, run_name: str, tags: dict[str, str], *, experiment_id: str | None = None
+    ) -> str:
+        """Creates a RUNNING run in the experiment (or `experiment_id`) and returns its id."""
+        experiment = experiment_id or self.experiment_id
+        return self._client.create_run(experiment, run_name=run_name, tags=tags).info.run_id
+
+    def set_running(self, run_id: str) -> None:
+        """Marks a run RUNNING again (a grid resumed)."""
+        self._client.update_run(run_id, status="RUNNING")
+
+    def end_run(self, run_id: str, status: str = "FINISHED", message: str = "") -> None:
+        """Ends a run with `status`; a message (why it failed or was killed) goes into its
+        `error` tag, cut to `run_layout.ERROR_CHARS`."""
+        if message:
+            self._client.set_tag(run_id, layout.ERROR, message[: layout.ERROR_CHARS])
+        self._client.set_terminated(run_id, status)
+
+    def set_tag(self, run_id: str, name: str, value: str) -> None:
+        """Sets a run's tag."""
+        self._client.set_tag(run_id, name, value)
+
+    def delete_tag(self, run_id: str, name: str) -> None:
+        """Deletes a run's tag."""
+        self._client.delete_tag(run_id, name)
+
+    def log_params(self, run_id: str, params: dict[str, object]) -> None:
+        """Logs a run's params (as text), a hundred per call (MLflow's limit)."""
+        from mlflow.entities import Param
+
+        items = [Param(k, str(v)) for k, v in params.items()]
+        for start in range(0, len(items), 100):
+            self._client.log_batch(run_id, params=items[start : start + 100])
+
+    def log_metric(self, run_id: str, name: str, value: float, step: int = 0) -> None:
+        """Logs one value of a run's metric."""
+        self._client.log_metric(run_id, name, value, step=step)
+
+    def log_artefact(self, run_id: str, path: Path, folder: str | None = None) -> None:
+        """Logs a local file (or folder) as a run's artefact, under `folder` when given."""
+        self._client.log_artifact(run_id, str(path), folder)
+
+    def log_document(self, run_id: str, document: dict, name: str) -> None:
+        """Logs a JSON document as a run's artefact `name`."""
+        self._client.log_dict(run_id, document, name)
+
+    def log_text(self, run_id: str, text: str, name: str) -> None:
+        """Logs a text as a run's artefact `name`."""
+        self._client.log_text(run_id, text, name)
+
+    def recorder(self, run_id: str, outage_s: float):
+        """Returns a trial recorder logging to the run (`MlflowRecorder`)."""
+        from linkevo.workers.store.mlflow_recorder import MlflowRecorder
+
+        return MlflowRecorder(self._client, run_id, outage_s=outage_s)
 
     def search(
         self, filter_string: str, *, order_by: list[str] | None = None, limit: int | None = None
@@ -107,7 +235,7 @@ class RunStore:
         ids = [self.experiment_id]
         while limit is None or len(runs) < limit:
             size = PAGE if limit is None else min(PAGE, limit - len(runs))
-            page = self.client.search_runs(
+            page = self._client.search_runs(
                 ids, filter_string, order_by=order_by, max_results=size, page_token=token
             )
             runs.extend(page)
@@ -184,11 +312,10 @@ class RunStore:
         Raises:
             NotFound: no such run, or a run whose approach keeps no repertoire.
         """
-        from mlflow.exceptions import MlflowException
 
         try:
-            run = self.client.get_run(run_id)
-        except MlflowException as exc:
+            run = self.run(run_id)
+        except NotFound as exc:
             raise NotFound(f"{run_id!r} is neither a trial run nor a grid id here") from exc
         tags, params = run.data.tags, run.data.params
         approach = tags.get(layout.APPROACH, "unknown")
@@ -256,12 +383,36 @@ class RunStore:
         from mlflow.exceptions import MlflowException
 
         try:
-            return Path(self.client.download_artifacts(run_id, name, str(into)))
+            return Path(self._client.download_artifacts(run_id, name, str(into)))
         except (MlflowException, OSError) as exc:
             raise NotFound(
                 f"run {run_id} has no artefact {name!r}: its trial did not finish, or the "
                 "store's artefacts were moved or deleted"
             ) from exc
+
+    def artefact_at(self, artifact_uri: str, name: str, folder: Path) -> Path | None:
+        """Returns a local path to artefact `name` of the run whose artefact root is
+        `artifact_uri`, or None when it has none: a `file:` root is read in place, any other
+        downloaded into `folder` (a server's proxied `mlflow-artifacts:` root through this
+        store). Many of these run at once on threads (a report's trials)."""
+        from urllib.parse import unquote, urlparse
+
+        from mlflow.artifacts import download_artifacts
+        from mlflow.exceptions import MlflowException
+
+        parsed = urlparse(artifact_uri)
+        if parsed.scheme in ("file", ""):
+            path = Path(unquote(parsed.path)) / name
+            return path if path.is_file() else None
+        folder.mkdir(parents=True, exist_ok=True)
+        try:
+            return Path(
+                download_artifacts(
+                    artifact_uri=f"{artifact_uri}/{name}", dst_path=folder, tracking_uri=self.uri
+                )
+            )
+        except (MlflowException, OSError):
+            return None
 
     def repertoire(self, run_id: str, into: Path) -> pd.DataFrame:
         """Returns the run's repertoire (a row per filled cell), checked by content.
@@ -284,7 +435,7 @@ class RunStore:
         """
         from linkevo.workers.store.tables import read_walk_map
 
-        if layout.WALK_MAP not in {a.path for a in self.client.list_artifacts(run_id)}:
+        if layout.WALK_MAP not in self.artefact_names(run_id):
             return None
         return read_walk_map(self.download(run_id, layout.WALK_MAP, into), run_id)
 
@@ -297,7 +448,7 @@ class RunStore:
         """
         from linkevo.workers.store.tables import read_walk_prediction
 
-        if layout.WALK_PREDICTION not in {a.path for a in self.client.list_artifacts(run_id)}:
+        if layout.WALK_PREDICTION not in self.artefact_names(run_id):
             return None
         return read_walk_prediction(self.download(run_id, layout.WALK_PREDICTION, into), run_id)
 

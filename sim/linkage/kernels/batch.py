@@ -13,7 +13,7 @@ import numpy as np
 from linkevo.sim.linkage.genome import MAX_BEAMS, N_NODES
 from linkevo.sim.linkage.kernels.codes import FP, FP2, FSL
 from linkevo.sim.linkage.kernels.geometry import crank_angles
-from linkevo.sim.linkage.kernels.jit import _BATCH
+from linkevo.sim.linkage.kernels.jit import _BATCH, _JIT
 from linkevo.sim.linkage.kernels.measures import (
     angle_error,
     find_foot,
@@ -32,12 +32,17 @@ from linkevo.sim.linkage.kernels.placement import decode_and_simulate, place_mot
 def evaluate_batch(
     genomes, legacy, n_angles, fitness, targets, is_step, n_chunks,
     loss, error, angle_err, valid, foot, foot_x, foot_y, wh, lis, st,
+    keep, ni_out, nf_out, bi_out, bf_out, nb_out, pos0_out, positions_out, bang_out,
 ):  # fmt: skip
     """Decodes, simulates and scores every genome; writes into the output arrays.
 
     genomes (N, 56); targets (P, 2); is_step (P,) bool; loss (N, 1) or (N, 2); error,
     foot (N,) int; angle_err (N,); valid (N, A); foot_x, foot_y (N, A); wh, lis (N, 2);
     st (N, 4). The batch is split into n_chunks contiguous chunks that share scratch.
+    With `keep`, every linkage's decoding and motion go into the `*_out` arrays as
+    `decode_batch` and `simulate_batch` write them (ni_out (N, 12, 4), nf_out (N, 12, 5),
+    bi_out (N, 15, 6), bf_out (N, 15), nb_out (N,), pos0_out (N, 12, 2), positions_out
+    (N, 12, A, 2), bang_out (N, 15, A) NaN-filled); without it they may be empty.
     """
     n = genomes.shape[0]
     theta = crank_angles(n_angles, legacy)
@@ -74,6 +79,9 @@ def evaluate_batch(
                 depth, ancestors,
             )  # fmt: skip
             f = find_foot(ys, ok, lows, rows)
+            if keep:
+                _keep(i, ni, nf, bi, bf, n_beams, xs, ys, ok, theta, ni_out, nf_out, bi_out,
+                      bf_out, nb_out, pos0_out, positions_out, bang_out)  # fmt: skip
             ae = angle_error(f, ni, bi, n_beams, xs, ys, ok, theta, legacy, codes)
             foot[i] = f
             angle_err[i] = ae
@@ -100,6 +108,49 @@ def evaluate_batch(
             structure(bf, n_beams, f, depth, ancestors, st, i)
             lis[i, 0] = st[i, 0]
             lis[i, 1] = f_l
+
+
+@numba.njit(**_JIT)
+def _keep(
+    i,
+    ni,
+    nf,
+    bi,
+    bf,
+    n_beams,
+    xs,
+    ys,
+    ok,
+    theta,
+    ni_out,
+    nf_out,
+    bi_out,
+    bf_out,
+    nb_out,
+    pos0_out,
+    positions_out,
+    bang_out,
+):
+    """Writes linkage i's decoding and motion into the batch's arrays (`evaluate_batch`)."""
+    for j in range(ni.shape[0]):
+        for c in range(ni.shape[1]):
+            ni_out[i, j, c] = ni[j, c]
+        for c in range(nf.shape[1]):
+            nf_out[i, j, c] = nf[j, c]
+        pos0_out[i, j, 0] = xs[j, 0]
+        pos0_out[i, j, 1] = ys[j, 0]
+    for b in range(bi.shape[0]):
+        for c in range(bi.shape[1]):
+            bi_out[i, b, c] = bi[b, c]
+        bf_out[i, b] = bf[b]
+    nb_out[i] = n_beams
+    for k in range(xs.shape[1]):
+        if ok[k]:
+            for b in range(n_beams):
+                bang_out[i, b, k] = recorded_angle(b, k, bi, xs, ys, theta)
+        for j in range(xs.shape[0]):
+            positions_out[i, j, k, 0] = xs[j, k] if ok[k] else np.nan
+            positions_out[i, j, k, 1] = ys[j, k] if ok[k] else np.nan
 
 
 @numba.njit(parallel=True, **_BATCH)

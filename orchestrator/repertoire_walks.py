@@ -172,11 +172,13 @@ def check_before_walking(
     resume: bool,
     restart: bool,
     physics: Physics | None = None,
+    *,
+    leased: bool = False,
 ) -> None:
-    """Refuses a walk map that cannot be made as asked, before anything is walked: another
-    process is making it, the run has one and neither `resume` nor `restart` is on (so
-    nothing is overwritten unasked), resuming would walk another robot than the map's
-    (`physics`, against the run's `WALK_MAP_PHYSICS` tag), or what it would read is
+    """Refuses a walk map that cannot be made as asked, before anything is walked: another process
+    is making it (unless this one holds its lease, `leased`), the run has one and neither `resume`
+    nor `restart` is on (so nothing is overwritten unasked), resuming would walk another robot than
+    the map's (`physics`, against the run's `WALK_MAP_PHYSICS` tag), or what it would read is
     missing or damaged (the repertoire; resuming, the walk map).
 
     Raises:
@@ -187,16 +189,16 @@ def check_before_walking(
     """
     from linkevo.orchestrator.lease import Lease, Subject
 
-    subject = Subject.walk_map(trial.run_id, trial.trial_key)
-    Lease.refuse_if_held(store.client, store.experiment_id, subject)
-    names = {a.path for a in store.client.list_artifacts(trial.run_id)}
+    if not leased:
+        Lease.refuse_if_held(store, Subject.walk_map(trial.run_id, trial.trial_key))
+    names = store.artefact_names(trial.run_id)
     if layout.WALK_MAP in names and not (resume or restart):
         raise WalkMapError(
             f"run {trial.run_id} ({trial.trial_key}) already has a walk map; add --resume "
             "to walk only the cells it lacks, or --restart to walk the map anew"
         )
     if resume and layout.WALK_MAP in names:
-        had = store.client.get_run(trial.run_id).data.tags.get(layout.WALK_MAP_PHYSICS, "{}")
+        had = store.tags(trial.run_id).get(layout.WALK_MAP_PHYSICS, "{}")
         wanted = physics_tag(physics or Physics())
         if json.loads(had) != json.loads(wanted):
             raise WalkMapError(
@@ -262,11 +264,10 @@ def walk_map(
     from linkevo.orchestrator.lease import Lease, Subject
 
     physics = physics or Physics()
-    check_before_walking(store, trial, resume, restart, physics)
-    store.client.set_tag(trial.run_id, layout.WALK_MAP_PHYSICS, physics_tag(physics))
-    subject = Subject.walk_map(trial.run_id, trial.trial_key)
-    lease = Lease.take(store.client, store.uri, store.experiment_id, subject)
+    lease = Lease.take(store, Subject.walk_map(trial.run_id, trial.trial_key))
     try:
+        check_before_walking(store, trial, resume, restart, physics, leased=True)
+        store.set_tag(trial.run_id, layout.WALK_MAP_PHYSICS, physics_tag(physics))
         with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
             table = store.repertoire(trial.run_id, Path(tmp) / "in")
             done = None if restart else store.walk_map(trial.run_id, Path(tmp) / "done")
@@ -324,18 +325,17 @@ def _log(
     frame = frame.merge(table[["cell", *bins]], on="cell", how="left").reset_index(drop=True)
     path = tmp / layout.WALK_MAP
     write_parquet_atomic(path, {c: frame[c].to_numpy() for c in frame.columns})
-    client = store.client
-    client.log_artifact(trial.run_id, str(path))
+    store.log_artefact(trial.run_id, path)
     if picture and not frame.empty:
         from linkevo.workers.plots.walk_map_figure import draw_walk_map
 
         png = draw_walk_map(frame, trial.approach, trial.trial_key, tmp / layout.WALK_MAP_PNG)
-        client.log_artifact(trial.run_id, str(png))
+        store.log_artefact(trial.run_id, png)
     walked = frame[frame["status"] == Status.WALKED]
     for floor, part in walked.groupby("floor"):
         distances = part.loc[~part["breaks"], "mean_distance_cm"].to_numpy(dtype=float)
         best = float(np.nanmax(distances)) if np.isfinite(distances).any() else math.nan
         if math.isfinite(best):
-            client.log_metric(trial.run_id, f"walk_best_cm_{floor}", best)
-        client.log_metric(trial.run_id, f"walk_cells_{floor}", float(len(part)))
+            store.log_metric(trial.run_id, f"walk_best_cm_{floor}", best)
+        store.log_metric(trial.run_id, f"walk_cells_{floor}", float(len(part)))
     return frame

@@ -197,24 +197,22 @@ def log_model(store: RunStore, fitted: FittedModel, refs: list[str], seed: int) 
 
     from linkevo.workers.store.tracking import ensure_experiment
 
-    client = store.client
     experiment_id = ensure_experiment(store.uri, store.experiment)
     description = {
         "features": {"version": FEATURES_VERSION, "names": list(FEATURE_NAMES)},
         "floors": list(FLOOR_ORDER),
-        "target": "cm walked in 10 s (credited, sim.robot.walk_fitness.credited_cm); breaks",
+        "target": "cm walked in 10 s (credited, sim.robot.walk_rows.credited_cm); breaks",
         "sources": refs,
         "trained_on": [t.run_id for t in fitted.trained_on],
         "held_out": [t.run_id for t in fitted.held_out],
         "walks": fitted.walks,
         "figures": {k: (None if math.isnan(v) else v) for k, v in fitted.figures.items()},
     }
-    run = client.create_run(
-        experiment_id,
-        run_name="walk-model",
-        tags={layout.KIND: layout.WALK_MODEL, "features": FEATURES_VERSION},
+    run_id = store.create_run(
+        "walk-model",
+        {layout.KIND: layout.WALK_MODEL, layout.FEATURES: FEATURES_VERSION},
+        experiment_id=experiment_id,
     )
-    run_id = run.info.run_id
     params = {
         "sources": ",".join(refs)[:500],
         "seed": seed,
@@ -222,24 +220,23 @@ def log_model(store: RunStore, fitted: FittedModel, refs: list[str], seed: int) 
         "held_out": len(fitted.held_out),
         "walks": fitted.walks,
     }
-    for name, value in params.items():
-        client.log_param(run_id, name, str(value))
+    store.log_params(run_id, params)
     for name, value in fitted.figures.items():
         if math.isfinite(value):
-            client.log_metric(run_id, name, value)
+            store.log_metric(run_id, name, value)
     with tempfile.TemporaryDirectory(prefix="linkevo-walkmodel-") as tmp:
         weights = Path(tmp) / layout.WALK_MODEL_PT
         torch.save(fitted.model.state_dict(), weights)
-        client.log_artifact(run_id, str(weights))
-        client.log_dict(run_id, description, layout.WALK_MODEL_JSON)
+        store.log_artefact(run_id, weights)
+        store.log_document(run_id, description, layout.WALK_MODEL_JSON)
         if fitted.prediction is not None and fitted.truth is not None:
             from linkevo.workers.plots.walk_model_figure import draw_predicted_vs_walked
 
             png = draw_predicted_vs_walked(
                 fitted.prediction, fitted.truth, fitted.figures, Path(tmp) / layout.WALK_MODEL_PNG
             )
-            client.log_artifact(run_id, str(png))
-    client.set_terminated(run_id)
+            store.log_artefact(run_id, png)
+    store.end_run(run_id)
     return run_id
 
 
@@ -266,12 +263,12 @@ def load_model(store: RunStore, run_id: str | None = None) -> tuple[WalkModel, s
         run_id = runs[0].info.run_id
     else:
         try:
-            run = store.client.get_run(run_id)
-        except Exception as exc:  # MLflow's error for an unknown or malformed id
+            tags = store.tags(run_id)
+        except NotFound as exc:
             raise NotFound(f"--model {run_id!r}: no such run in the store {store.uri}") from exc
-        if run.data.tags.get(layout.KIND) != layout.WALK_MODEL:
+        if tags.get(layout.KIND) != layout.WALK_MODEL:
             raise NotFound(f"run {run_id} is not a walk model (linkevo walkmodel fit makes one)")
-    features = store.client.get_run(run_id).data.tags.get("features")
+    features = store.tags(run_id).get(layout.FEATURES)
     if features != FEATURES_VERSION:
         raise WalkModelError(
             f"walk model {run_id} was fitted on features {features!r}, this linkevo computes "
@@ -322,8 +319,8 @@ def predict(store: RunStore, trial: TrialRun, model: WalkModel, model_run: str) 
         frame = prediction_frame(model, table, trial.mode)
         path = Path(tmp) / layout.WALK_PREDICTION
         write_parquet_atomic(path, {c: frame[c].to_numpy() for c in frame.columns})
-        store.client.log_artifact(trial.run_id, str(path))
-        store.client.set_tag(trial.run_id, layout.PREDICTED_BY, model_run)
+        store.log_artefact(trial.run_id, path)
+        store.set_tag(trial.run_id, layout.PREDICTED_BY, model_run)
     return frame
 
 
