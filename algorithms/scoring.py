@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from linkevo.sim.robot.walk_rows import WALKER_CM
+
 QD_OFFSETS: dict[str, float] = {"Fp": 1000.0, "Fsl": 200.0, "Fw": 0.0}
 """QD-score offset per fitness: a cell adds max(offset - loss, 0).
 
@@ -21,9 +23,9 @@ HV_REFERENCES: dict[str, tuple[float, float]] = {
 """NSGA-II hypervolume reference point per two-objective fitness (above the worst random
 losses: Fp2 (330, 273) paper / (516, 435) legacy; Fsl2 (39, 39) / (184, 130)); for F_w2 the
 area of (flat, carpet) distances dominated by legs that walk forwards on both (cm²)."""
-WALKER_LOSS = -50.0
+WALKER_LOSS = -WALKER_CM
 """An F_w loss at or below this is a walker: 50 cm or more on both floors in 10 s, without
-breaking (`sim.robot.walk_fitness.WALKER_CM`)."""
+breaking (`sim.robot.walk_rows.WALKER_CM`)."""
 
 
 def coverage(filled: int, n_cells: int) -> float:

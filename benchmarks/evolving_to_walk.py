@@ -15,7 +15,7 @@ common_grid`: 100 x 100 cells of mean beam length x lift) so that a population a
 repertoire compare:
 
 - best walker: the furthest worse-floor walk (cm per 10 s, credited at most the level-body
-  bound, `sim.robot.walk_fitness.credited_cm`) of a leg that breaks on neither floor;
+  bound, `sim.robot.walk_rows.credited_cm`) of a leg that breaks on neither floor;
 - walkers: shared-grid cells holding a leg that walks at least 50 cm on both floors
   without breaking;
 - walking QD-score: over the shared grid's cells, the furthest worse-floor forward walk of
@@ -46,21 +46,20 @@ from linkevo.orchestrator.report.verdicts import judge
 from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, bin_descriptors, cell_index
 from linkevo.sim.linkage.evaluating import evaluate
 from linkevo.sim.robot.hexapod import WALK_SECONDS
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER, WALKER_CM
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.runs import RunStore, latest_per_trial
 
-FLOORS = ("flat", "carpet")
-WALKER_CM = 50.0
 ARM_D = "MAP-LIS, F_p + walk map"
 MEASURES = ("best_walker_cm", "walkers", "walking_qd")
 
 
 def worse_floor(rows: pd.DataFrame) -> np.ndarray:
-    """Returns (N,) the worse floor's credited distance (`sim.robot.walk_fitness.credited_cm`) of
+    """Returns (N,) the worse floor's credited distance (`sim.robot.walk_rows.credited_cm`) of
     walk rows with `<floor>_<field>` columns, NaN where a floor was not walked or the robot
     broke on one."""
     out = np.full(len(rows), np.inf)
-    for floor in FLOORS:
+    for floor in FLOOR_ORDER:
         sound = (rows[f"{floor}_status"] == "walked").to_numpy() & ~rows[
             f"{floor}_breaks"
         ].to_numpy(dtype=bool)

@@ -14,7 +14,7 @@ import pandas as pd
 from linkevo.sim.linkage.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.linkage.physical import TOGGLE_DEG
 from linkevo.sim.robot.hexapod import in_floor_order
-from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status
+from linkevo.sim.robot.walk_rows import FLOOR_FIELDS, FLOOR_ORDER, Status
 from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES, WALKING_FITNESS
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
@@ -259,14 +259,8 @@ def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataF
     rows = []
     for i in match[-1:]:
         for floor in FLOOR_ORDER:
-            own = [c for c in log.columns if c.startswith(f"{floor}_")]
-            rows.append(
-                {"floor": floor, **{c.removeprefix(f"{floor}_"): log[c].iloc[i] for c in own}}
-            )
-    return pd.DataFrame(
-        rows,
-        columns=["floor", "status", "mean_distance_cm", "breaks", "reason", "seconds", "bound_cm"],
-    )
+            rows.append({"floor": floor, **{c: log[f"{floor}_{c}"].iloc[i] for c in FLOOR_FIELDS}})
+    return pd.DataFrame(rows, columns=["floor", *FLOOR_FIELDS])
 
 
 def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:

@@ -3,7 +3,7 @@ on each floor, fanned out over Ray (`linkevo walkmap`) in two steps: the cells' 
 in batches of cells, then each distinct leg walked once, in batches of legs
 (`sim.robot.walk_map`).
 
-The result is the trial's `walkmap.parquet` (a row per cell and floor: `sim.robot.walk_map.COLUMNS`
+The result is the trial's `walkmap.parquet` (a row per cell and floor: `sim.robot.walk_rows.COLUMNS`
 and the cell's bins) and `walkmap.png` (distance per cell, a panel per floor), logged to
 the trial's run. Rows are logged as they come, every `CHECKPOINT_S`, so `--resume` after an
 interruption walks only what is missing (and what failed).
@@ -220,7 +220,7 @@ def physics_tag(physics: Physics) -> str:
 
 @dataclass(frozen=True)
 class WalkMapResult:
-    """A walk map as logged: its rows (`sim.robot.walk_map.COLUMNS` and the cells' bins), and
+    """A walk map as logged: its rows (`sim.robot.walk_rows.COLUMNS` and the cells' bins), and
     whether this call walked anything (False: the map was complete already)."""
 
     frame: pd.DataFrame

@@ -6,7 +6,7 @@ on both floors: each is told with its walk-map rows, so it enters the archive as
 and costs no walk (`walks_reused` in the metrics). Cells the walk map did not walk (or
 walked as evolved) are left out: a warm start continues a map towards walking, it does
 not walk it anew. A walk-map walk lasts 10 s and a search walk `SEARCH_SECONDS`; losses
-are per 10 s either way (`sim.robot.walk_fitness.credited_cm`).
+are per 10 s either way (`sim.robot.walk_rows.credited_cm`).
 """
 
 from __future__ import annotations

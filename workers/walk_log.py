@@ -114,7 +114,7 @@ class WalkLog:
         return {str(self.key[i]): self.rows(i) for i in walked}
 
     def rows(self, i: int) -> dict[str, dict]:
-        """Returns candidate i's row per floor (`sim.robot.walk_map.COLUMNS`, cell -1)."""
+        """Returns candidate i's row per floor (`sim.robot.walk_rows.COLUMNS`, cell -1)."""
         out = {}
         for floor, columns in self.floors.items():
             values = {k: v[i].item() for k, v in columns.items()}
@@ -123,7 +123,7 @@ class WalkLog:
 
     def metrics(self) -> dict[str, float]:
         """Returns the running counts and the best sound walk on each floor (cm credited,
-        `sim.robot.walk_fitness.credited_cm`; NaN before any)."""
+        `sim.robot.walk_rows.credited_cm`; NaN before any)."""
         out = {k: float(v) for k, v in self.counts.items()}
         for floor in FLOOR_ORDER:
             columns = self.floors[floor]
@@ -193,7 +193,7 @@ class WalkLog:
         return frame
 
     def walk_map(self, cells: np.ndarray, genomes: np.ndarray) -> pd.DataFrame:
-        """Returns the walk map (`sim.robot.walk_map.COLUMNS`) of kept individuals: cells (N,)
+        """Returns the walk map (`sim.robot.walk_rows.COLUMNS`) of kept individuals: cells (N,)
         and genomes (N, 56), a row per floor for each that the log built."""
         at = {g.tobytes(): i for i, g in enumerate(self.genome)}
         rows = []

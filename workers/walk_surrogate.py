@@ -26,7 +26,7 @@ import numpy as np
 from linkevo.algorithms.scoring import QD_OFFSETS
 from linkevo.algorithms.walk_model import WalkData, WalkModel
 from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features, walk_targets
-from linkevo.sim.robot.walk_rows import Stage
+from linkevo.sim.robot.walk_rows import COLUMNS, Stage
 from linkevo.sim.study import WALKING_FITNESS
 
 START = 200
@@ -105,7 +105,7 @@ def training_data(log, rows: int, mode: str) -> WalkData:
     walked = np.flatnonzero(log.stage[:rows] == Stage.WALKED)
     frame = pd.DataFrame(
         [{**row, "cell": j} for j, i in enumerate(walked) for row in log.rows(i).values()],
-        columns=["cell", "floor", "status", "breaks", "mean_distance_cm", "bound_cm", "seconds"],
+        columns=list(COLUMNS),
     )
     distance, breaks = walk_targets(frame, np.arange(len(walked)))
     return WalkData(walk_features(log.genome[walked], mode), distance, breaks)

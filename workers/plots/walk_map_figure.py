@@ -23,7 +23,7 @@ BROKEN = ListedColormap(["#e34a33"])
 
 
 def draw_walk_map(frame: pd.DataFrame, approach: str, name: str, path: Path) -> Path:
-    """Draws the walk map (`sim.robot.walk_map.COLUMNS` rows with the cells' bins) to a PNG at
+    """Draws the walk map (`sim.robot.walk_rows.COLUMNS` rows with the cells' bins) to a PNG at
     `path`, atomically, and returns the path.
 
     Args:

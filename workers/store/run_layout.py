@@ -98,7 +98,7 @@ CHECKPOINT_DIR = "checkpoint"
 REPERTOIRE = "repertoire.parquet"
 POPULATION = "population.parquet"
 WALK_MAP = "walkmap.parquet"
-"""A repertoire trial's walk map: a row per walked cell and floor (`sim.robot.walk_map.COLUMNS`
+"""A repertoire trial's walk map: a row per walked cell and floor (`sim.robot.walk_rows.COLUMNS`
 plus the cell's bins), logged by `linkevo walkmap`, or by a walking trial (fitness F_w)
 itself."""
 WALK_MAP_PNG = "walkmap.png"
