@@ -72,7 +72,7 @@ def _untimed(value):
 
 def linkevo(tree: Path, work: Path, *words: str) -> str:
     """Runs linkevo from `tree` and returns what it printed (raises on a failure)."""
-    env = tree_env(tree, work) if tree != HERE else None
+    env = tree_env(tree, work)
     done = subprocess.run(
         [sys.executable, "-m", "linkevo.orchestrator", *words],
         cwd=work,
