@@ -157,7 +157,19 @@ class WalkModel:
 
     @classmethod
     def from_state_dict(cls, state: dict[str, torch.Tensor]) -> WalkModel:
-        """Returns the model `state_dict` gave (ValueError when it is not one)."""
+        """Returns the model `state_dict` gave.
+
+        Raises:
+            ValueError: it is not one (not a table of tensors, a tensor missing or of
+                another shape), or a weight is not a finite number (it would predict NaN).
+        """
+        if not isinstance(state, dict) or not all(
+            isinstance(v, torch.Tensor) for v in state.values()
+        ):
+            raise ValueError(f"not a walk model's state: a {type(state).__name__}, not tensors")
+        bad = sorted(k for k, v in state.items() if not bool(torch.isfinite(v).all()))
+        if bad:
+            raise ValueError(f"its weights {', '.join(bad[:3])} hold values that are not finite")
         try:
             n_features = int(state["feature_mean"].shape[0])
             members = len({k.split(".")[0] for k in state if k.startswith("member")})
@@ -169,7 +181,7 @@ class WalkModel:
                 member.load_state_dict(
                     {k.removeprefix(prefix): v for k, v in state.items() if k.startswith(prefix)}
                 )
-        except (KeyError, RuntimeError, IndexError) as exc:
+        except (KeyError, RuntimeError, IndexError, TypeError) as exc:
             raise ValueError(f"not a walk model's state: {exc}") from exc
         return model
 

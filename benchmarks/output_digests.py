@@ -12,7 +12,8 @@ across moved modules, and prints a digest per output and whether the two trees a
 - a walk map of the 40 lowest-loss buildable cells of a MAP-LIS repertoire.
 
 Timing columns (seconds a candidate took, the node it ran on, wall times) are left out of
-the digests; everything else counts. Pictures are digested by their pixels.
+the digests; everything else counts. Pictures are digested by their pixels, torch files by
+their tensors (`torch.save` writes a random id into every file).
 
 Run: `.venv/bin/python benchmarks/output_digests.py [--against TREE] [--only trials]`
 """
@@ -52,6 +53,13 @@ def digest_file(path: Path) -> str:
         h.update(frame.to_csv(index=False).encode())
     elif path.suffix == ".json":
         h.update(json.dumps(_untimed(json.loads(path.read_text())), sort_keys=True).encode())
+    elif path.suffix == ".pt":  # a torch file's bytes hold a random id: digest its tensors
+        import torch
+
+        state = torch.load(path, weights_only=True)
+        for name in sorted(state):
+            h.update(name.encode())
+            h.update(state[name].numpy().tobytes())
     elif path.suffix == ".png":
         from PIL import Image
 

@@ -14,7 +14,7 @@ from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN
 from linkevo.hardware.protocol import MAX_ID
 from linkevo.sim.errors import ConfigError
 from linkevo.sim.robot.gait import GaitConfig, limits, range_error
-from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.hexapod import Physics, Robot
 
 T = TypeVar("T")
 
@@ -91,6 +91,22 @@ class RobotConfig:
     def motor(self, motor_id: int) -> MotorConfig:
         """Returns the config of the motor with this id."""
         return next(m for m in self.motors if m.id == motor_id)
+
+    def robot(self) -> Robot:
+        """Returns the robot a simulated walk walks, whole: its `[physics]`, its `[gait]` and
+        each leg's phase offset from its motor's `name` (the slot, `sim.robot.hexapod.LEG_SLOTS`)
+        and `phase_deg` (the one loader of every command that walks).
+
+        Raises:
+            ConfigError: the motors are not the six slots, named once each.
+        """
+        phases = {m.name: m.phase_deg for m in self.motors}
+        try:
+            if len(phases) != len(self.motors):
+                raise ValueError(f"two motors share a name among {[m.name for m in self.motors]}")
+            return Robot(self.physics, self.gait, phases)
+        except ValueError as exc:
+            raise ConfigError(f"robot config: {exc}") from None
 
     def with_port(self, port: str) -> RobotConfig:
         """Returns a copy that talks to another serial port (e.g. the emulator's pty)."""
@@ -183,6 +199,12 @@ def load_config(path: str | Path) -> RobotConfig:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except FileNotFoundError as exc:
         raise ConfigError(f"robot config {str(path)!r} does not exist") from exc
+    except IsADirectoryError as exc:
+        raise ConfigError(f"robot config {str(path)!r} is a folder; give a TOML file") from exc
+    except OSError as exc:
+        raise ConfigError(f"robot config {str(path)!r} cannot be read ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"robot config {str(path)!r} is not UTF-8 text (TOML)") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"robot config {str(path)!r} is not valid TOML: {exc}") from exc
     return parse_config(raw, str(path))

@@ -91,18 +91,22 @@ def log_field_trial(
         **(tags or {}),
     }
     run_id = store.create_run(f"field-{source.approach}-{robot}-{floor}", tags)
-    store.log_params(run_id, params)
-    for step, distance in enumerate(distances):
-        store.log_metric(run_id, layout.DISTANCE_CM, distance, step=step)
-    if distances:
-        store.log_metric(run_id, layout.MEAN_DISTANCE_CM, statistics.fmean(distances))
-    for name, value in (metrics or {}).items():
-        store.log_metric(run_id, name, value)
-    store.log_document(run_id, source.document, layout.LINKAGE_JSON)
-    for name, document in (artifacts or {}).items():
-        store.log_document(run_id, document, name)
-    for path in telemetry:
-        store.log_artefact(run_id, path, "telemetry" if path.suffix == ".csv" else "pictures")
+    try:
+        store.log_params(run_id, params)
+        for step, distance in enumerate(distances):
+            store.log_metric(run_id, layout.DISTANCE_CM, distance, step=step)
+        if distances:
+            store.log_metric(run_id, layout.MEAN_DISTANCE_CM, statistics.fmean(distances))
+        for name, value in (metrics or {}).items():
+            store.log_metric(run_id, name, value)
+        store.log_document(run_id, source.document, layout.LINKAGE_JSON)
+        for name, document in (artifacts or {}).items():
+            store.log_document(run_id, document, name)
+        for path in telemetry:
+            store.log_artefact(run_id, path, "telemetry" if path.suffix == ".csv" else "pictures")
+    except BaseException as exc:  # a signal or a failure mid-log: never left RUNNING
+        store.end_run(run_id, "KILLED", f"not logged whole: {type(exc).__name__} {exc}")
+        raise
     store.end_run(run_id)
     return run_id
 

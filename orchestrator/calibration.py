@@ -3,7 +3,7 @@ recorded field trials (`linkevo hexapod trial`), with a held-out error by
 cross-validation, written as a robot config every command takes (`--config`).
 
 What is fitted: any of the `[physics]` parameters (`sim.robot.hexapod.PHYSICS_KEYS`) and the
-gait's speed and gains (`GAIT_KEYS`). The loss is the mean squared difference, in cm²,
+gait's speed and gains (`FITTED_GAIT`). The loss is the mean squared difference, in cm²,
 between each trial's measured mean distance and the distance the simulator walks the
 same linkage on the same floor for the same seconds (the lean model, one walk from the
 unperturbed start: deterministic, so the loss is a function of the parameters alone).
@@ -26,20 +26,19 @@ from pathlib import Path
 import numpy as np
 
 from linkevo.hardware.config import RobotConfig
-from linkevo.orchestrator.simulated_trials import gait_of
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.linkage_doc import from_document
 from linkevo.sim.robot.gait import GaitConfig
-from linkevo.sim.robot.hexapod import PHYSICS_KEYS, Physics, floor
+from linkevo.sim.robot.hexapod import FLOORS, PHYSICS_KEYS, Physics, floor
 from linkevo.sim.robot.leg import leg_from_genome
 from linkevo.sim.robot.walking import WalkSettings, walk
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.runs import NotFound
 
-GAIT_KEYS: tuple[str, ...] = ("speed_rpm", "kp", "ki", "kd")
+FITTED_GAIT: tuple[str, ...] = ("speed_rpm", "kp", "ki", "kd")
 """The gait's values a calibration may fit (`[gait]` of the robot config)."""
-CALIBRATED: tuple[str, ...] = (*PHYSICS_KEYS, *GAIT_KEYS)
+CALIBRATED: tuple[str, ...] = (*PHYSICS_KEYS, *FITTED_GAIT)
 """Every name `--params` accepts."""
 MAX_FOLDS = 10
 
@@ -108,6 +107,11 @@ def read_field_trials(store, run_ids: list[str]) -> list[FieldTrial]:
                 f"--trials {run_id}: a simulated field trial (simulated = "
                 f"{params[layout.SIMULATED]}); allowed: trials walked by the real robot only"
             )
+        if tags.get(layout.FLOOR) not in FLOORS:
+            raise CalibrationError(
+                f"--trials {run_id}: walked on the floor {tags.get(layout.FLOOR)!r}, which the "
+                f"simulator does not model; allowed: trials on {', '.join(FLOORS)}"
+            )
         history = store.metric_history(run_id, layout.DISTANCE_CM)
         if not history:
             raise CalibrationError(f"--trials {run_id}: the field trial has no distances")
@@ -129,7 +133,7 @@ def with_values(config: RobotConfig, values: dict[str, float]) -> RobotConfig:
     """Returns the config with the named physics and gait values replaced (checked by
     `Physics`' ranges; gait values by `GaitConfig`'s through the config loader)."""
     physics = {k: v for k, v in values.items() if k in PHYSICS_KEYS}
-    gait = {k: v for k, v in values.items() if k in GAIT_KEYS}
+    gait = {k: v for k, v in values.items() if k in FITTED_GAIT}
     return dataclasses.replace(
         config,
         physics=dataclasses.replace(config.physics, **physics),
@@ -149,18 +153,11 @@ def bounds(name: str) -> tuple[float, float]:
 
 def simulated_cm(config: RobotConfig, trials: list[FieldTrial]) -> np.ndarray:
     """Returns (T,) the distance the simulator walks each trial's linkage, in cm."""
-    gait, offsets = gait_of(config)
+    robot = config.robot()
     out = []
     for trial in trials:
         leg = leg_from_genome(*from_document(trial.document))
-        w = walk(
-            leg,
-            floor(trial.floor),
-            gait=gait,
-            offsets_deg=offsets,
-            settings=WalkSettings(seconds=trial.seconds),
-            physics=config.physics,
-        )
+        w = walk(leg, floor(trial.floor), settings=WalkSettings(seconds=trial.seconds), robot=robot)
         out.append(w.distance_m * 100.0 if math.isfinite(w.distance_m) else 0.0)
     return np.array(out)
 
@@ -259,7 +256,7 @@ def config_text(base_text: str, config: RobotConfig, result: Calibration, note: 
     replaced by the calibrated config's (comments kept; `[physics]` written last, under
     `note`)."""
     fitted = with_values(config, result.values)
-    gait = [k for k in GAIT_KEYS if k in result.values]
+    gait = [k for k in FITTED_GAIT if k in result.values]
     section, out = "", []
     for line in base_text.splitlines():
         stripped = line.strip()

@@ -146,17 +146,50 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout, sys.stderr = streams
 
 
+def terminate_as_interrupt(signum: int, frame: object) -> None:
+    """SIGTERM stops a command as Ctrl-C does: a KeyboardInterrupt("SIGTERM") that every
+    command's interrupt handling sees (what was done is kept, runs are ended KILLED, the
+    line that resumes is printed)."""
+    raise KeyboardInterrupt("SIGTERM")
+
+
+def os_error_text(exc: OSError) -> str:
+    """Returns an OS error on a path in one line: the file, what the system says, and what
+    to do."""
+    where = exc.filename if exc.filename is not None else "a file"
+    return (
+        f"{where}: {exc.strerror or exc}; check the path (it must exist, be of the kind "
+        "asked for and be readable, or writable for an output) and the free disk space"
+    )
+
+
 def _main(argv: list[str] | None) -> int:
+    import signal
+    import threading
+
     quiet_libraries()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help, or a value an option refuses (argparse printed it)
         return int(exc.code or 0)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, terminate_as_interrupt)
     try:
         return int(args.func(args) or 0)
     except LinkevoError as exc:
         print(f"linkevo {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a path the user gave: missing, a folder, unreadable, a full disk
+        print(f"linkevo {args.command}: error: {os_error_text(exc)}", file=sys.stderr)
+        return 2
+    except UnicodeDecodeError as exc:
+        print(
+            f"linkevo {args.command}: error: a file it read is not UTF-8 text ({exc.reason} "
+            f"at byte {exc.start}); give the file linkevo wrote, not a binary or another "
+            "encoding",
+            file=sys.stderr,
+        )
         return 2
     except Exception as exc:
         damage = _store_damage(exc)
@@ -168,6 +201,13 @@ def _main(argv: list[str] | None) -> int:
             file=sys.stderr,
         )
         return 2
-    except KeyboardInterrupt:
-        print(f"linkevo {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        by = "SIGTERM" if exc.args == ("SIGTERM",) else "Ctrl-C"
+        print(f"linkevo {args.command}: interrupted ({by})", file=sys.stderr)
+        return interrupted_code(exc)
+
+
+def interrupted_code(exc: KeyboardInterrupt) -> int:
+    """Returns the exit status of a command stopped by a signal: 143 for SIGTERM
+    (`terminate_as_interrupt`), 130 for Ctrl-C, as a shell reports them."""
+    return 143 if exc.args == ("SIGTERM",) else 130

@@ -12,12 +12,14 @@ from pathlib import Path
 from typing import Any
 
 from linkevo.sim.errors import ConfigError
-from linkevo.sim.robot.hexapod import PHYSICS_KEYS, Physics
+from linkevo.sim.robot.gait import GAIT_KEYS
+from linkevo.sim.robot.hexapod import PHYSICS_KEYS, Robot
 from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
     DEFAULT_BATCH,
     DEFAULT_WALK_BATCH,
+    MAX_WALKS,
     MIN_ANGLES,
     MODES,
     SINGLE_FITNESSES,
@@ -44,7 +46,7 @@ COUNT_LIMITS = {
     "evaluators_per_trial": 1024,
     "checkpoint_every": 1_000_000,
     "n_angles": 3600,
-    "walks": 10_000_000,
+    "walks": MAX_WALKS,
     "walk_batch": 100_000,
 }
 """The largest value each count may take: counts are bounded before any work, so a slip
@@ -115,6 +117,9 @@ class GridConfig:
             (`sim.robot.hexapod.Physics`; a `[physics]` table, as the robot config's, e.g. the
             one `linkevo hexapod calibrate` writes), for every walk of the grid's trials
             (fitness F_w, `walk_rerank`); empty (the default): the study's robot.
+        gait: the gait's settings that differ from the study's (`sim.robot.gait.GaitConfig`;
+            a `[gait]` table, as the robot config's), for the same walks; empty (the
+            default): the study's gait. The legs keep the study's tripods.
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -149,6 +154,7 @@ class GridConfig:
     seed_from: str = ""
     surrogate: bool = False
     physics: dict[str, float] = field(default_factory=dict)
+    gait: dict[str, float] = field(default_factory=dict)
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -175,8 +181,8 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank`, `seed_from`, `surrogate` and `physics` count only when they are
-        on, and `walks`
+        `walk_rerank`, `seed_from`, `surrogate`, `physics` and `gait` count only when they
+        are on, and `walks`
         and `walk_batch` only for a grid with walking trials, so grids without them keep
         their ids. `trials` does not
         count: a trial's seed depends on its index, not on how many the grid holds, so a
@@ -190,8 +196,9 @@ class GridConfig:
             del out["seed_from"]
         if not out["surrogate"]:
             del out["surrogate"]
-        if not out["physics"]:
-            del out["physics"]
+        for key in ("physics", "gait"):
+            if not out[key]:
+                del out[key]
         return out
 
 
@@ -268,14 +275,14 @@ def _validate(cfg: GridConfig) -> None:
     _check_int(cfg, "n_angles", MIN_ANGLES)
     for key in ("seed", "max_concurrent_trials", "max_retries", "evaluators_per_trial"):
         _check_int(cfg, key, 0)
+    _check_int(cfg, "walks", 0)
+    _check_int(cfg, "walk_batch", 1)
     for key, most in COUNT_LIMITS.items():
         if getattr(cfg, key) > most:
             raise _fail(key, getattr(cfg, key), f"allowed: at most {most:,}")
     _check_int(cfg, "walk_rerank", 0)
     if cfg.walk_rerank > MAX_WALK_RERANK:
         raise _fail("walk_rerank", cfg.walk_rerank, f"allowed: 0 to {MAX_WALK_RERANK}")
-    _check_int(cfg, "walks", 0)
-    _check_int(cfg, "walk_batch", 1)
     _check_number(cfg, "cpus_per_evaluator", 0.0, strict=True)
     _check_number(cfg, "server_outage_s", 0.0, strict=True)
     if cfg.trial_cpus != "auto":
@@ -313,12 +320,14 @@ def _validate(cfg: GridConfig) -> None:
                 'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
                 f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
             )
-    if not isinstance(cfg.physics, dict):
-        raise _fail("physics", cfg.physics, f"allowed: a table of {', '.join(PHYSICS_KEYS)}")
-    try:
-        Physics.of(cfg.physics)
-    except (TypeError, ValueError) as exc:
-        raise _fail("physics", cfg.physics, str(exc)) from None
+    for key, names in (("physics", PHYSICS_KEYS), ("gait", GAIT_KEYS)):
+        table = getattr(cfg, key)
+        if not isinstance(table, dict):
+            raise _fail(key, table, f"allowed: a table of {', '.join(names)}")
+        try:
+            Robot.of({key: table})
+        except (TypeError, ValueError) as exc:
+            raise _fail(key, table, str(exc)) from None
     _check_choices(cfg, "mode", MODES, many=False)
     _check_choices(cfg, "target", TARGETS, many=False)
     for key in ("experiment", "tracking_uri", "work_dir"):

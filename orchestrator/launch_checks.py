@@ -85,6 +85,7 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
             max_seconds=cfg.max_seconds,
             options=dict(cfg.options.get(cell.approach, {})),
             physics=dict(cfg.physics),
+            gait=dict(cfg.gait),
         )
         try:
             if cell.fitness == WALKING_FITNESS:
@@ -136,6 +137,11 @@ def check_seed(store: RunStore, run_id: str) -> None:
             + (f" without {', '.join(missing)}" if missing else "")
             + (f" (`linkevo walkmap {run_id}` makes its walk map)" if missing else "")
         )
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="linkevo-seed-") as tmp:  # both read and checked
+        store.repertoire(run_id, Path(tmp) / "repertoire")
+        store.walk_map(run_id, Path(tmp) / "walks")
 
 
 def check_no_shrink(grid: Grid, earlier: list) -> None:

@@ -26,7 +26,7 @@ import pandas as pd
 from linkevo.sim import decode, simulate
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.physical import physical_checks
-from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.hexapod import Robot
 from linkevo.sim.robot.walk_map import CellBatch
 from linkevo.sim.robot.walk_map import walk_rows as _walk_rows
 from linkevo.sim.robot.walk_rows import COLUMNS, Status, walk_map_frame
@@ -122,11 +122,11 @@ Runner = Callable[[Callable[[Any], Any], list], Iterable[Any]]
 
 
 def walk_rows(
-    run: Runner, batches: list[CellBatch], seconds: float, physics: Physics | None = None
+    run: Runner, batches: list[CellBatch], seconds: float, robot: Robot | None = None
 ) -> Iterator[tuple[int, list[dict]]]:
     """`sim.robot.walk_map.walk_rows` in tasks of `BATCH_LEGS` distinct legs: yields, as each
     task ends, how many cells it built and the rows it settled."""
-    return _walk_rows(run, batches, seconds, BATCH_LEGS, physics)
+    return _walk_rows(run, batches, seconds, BATCH_LEGS, robot)
 
 
 def run_in_process(work: Callable[[Any], Any], items: list) -> Iterator[Any]:
@@ -171,14 +171,14 @@ def check_before_walking(
     trial: TrialRun,
     resume: bool,
     restart: bool,
-    physics: Physics | None = None,
+    robot: Robot | None = None,
     *,
     leased: bool = False,
 ) -> None:
     """Refuses a walk map that cannot be made as asked, before anything is walked: another process
     is making it (unless this one holds its lease, `leased`), the run has one and neither `resume`
     nor `restart` is on (so nothing is overwritten unasked), resuming would walk another robot than
-    the map's (`physics`, against the run's `WALK_MAP_PHYSICS` tag), or what it would read is
+    the map's (`robot`, against the run's `WALK_MAP_ROBOT` tag), or what it would read is
     missing or damaged (the repertoire; resuming, the walk map).
 
     Raises:
@@ -198,13 +198,14 @@ def check_before_walking(
             "to walk only the cells it lacks, or --restart to walk the map anew"
         )
     if resume and layout.WALK_MAP in names:
-        had = store.tags(trial.run_id).get(layout.WALK_MAP_PHYSICS, "{}")
-        wanted = physics_tag(physics or Physics())
-        if json.loads(had) != json.loads(wanted):
+        had = walked_robot(store.tags(trial.run_id))
+        wanted = (robot or Robot()).changed()
+        if had != wanted:
             raise WalkMapError(
-                f"run {trial.run_id} ({trial.trial_key}): its walk map walked a robot with "
-                f"physics {had}, this one has {wanted}; resume with the map's robot config, "
-                "or --restart to walk the map anew on this robot"
+                f"run {trial.run_id} ({trial.trial_key}): its walk map walked the robot "
+                f"{json.dumps(had, sort_keys=True)}, this one is "
+                f"{json.dumps(wanted, sort_keys=True)} (what differs from the study's robot); "
+                "resume with the map's robot config, or --restart to walk the map anew"
             )
     with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
         store.repertoire(trial.run_id, Path(tmp) / "in")
@@ -212,10 +213,20 @@ def check_before_walking(
             store.walk_map(trial.run_id, Path(tmp) / "done")
 
 
-def physics_tag(physics: Physics) -> str:
-    """Returns the `WALK_MAP_PHYSICS` tag of a robot: its parameters that differ from the
-    study's, as JSON ("{}" for the study's robot)."""
-    return json.dumps(physics.changed(), sort_keys=True)
+def robot_tag(robot: Robot) -> str:
+    """Returns the `WALK_MAP_ROBOT` tag of a robot: what differs from the study's robot, as
+    JSON (`Robot.changed`; "{}" for the study's robot)."""
+    return json.dumps(robot.changed(), sort_keys=True)
+
+
+def walked_robot(tags: dict[str, str]) -> dict:
+    """Returns what the robot of a run's walk map changed from the study's (`Robot.changed`):
+    its `WALK_MAP_ROBOT` tag, or a map tagged with its physics alone by an older linkevo
+    (`WALK_MAP_PHYSICS`); {} for the study's robot."""
+    if layout.WALK_MAP_ROBOT in tags:
+        return json.loads(tags[layout.WALK_MAP_ROBOT])
+    physics = json.loads(tags.get(layout.WALK_MAP_PHYSICS, "{}"))
+    return {"physics": physics} if physics else {}
 
 
 @dataclass(frozen=True)
@@ -237,7 +248,7 @@ def walk_map(
     resume: bool = False,
     restart: bool = False,
     seconds: float,
-    physics: Physics | None = None,
+    robot: Robot | None = None,
     tick: Callable[[str, int, int], None] | None = None,
 ) -> WalkMapResult:
     """Walks one repertoire trial's chosen cells and logs its walk map; returns it.
@@ -251,7 +262,7 @@ def walk_map(
         resume: complete the map the run already has; a complete map is returned as it
             is, nothing logged.
         restart: walk the map anew, replacing the run's (a damaged one, say).
-        physics: the robot's parameters (default: the study's robot); tagged on the run.
+        robot: the robot walked (default: the study's robot); tagged on the run.
         tick: called as tasks end with ("building legs", cells built, cells), then with
             ("walking", pairs done, pairs); a (cell, floor) pair is done when its row is
             known (a cell that is not walked, as it is built).
@@ -263,11 +274,11 @@ def walk_map(
     """
     from linkevo.orchestrator.lease import Lease, Subject
 
-    physics = physics or Physics()
+    robot = robot or Robot()
     lease = Lease.take(store, Subject.walk_map(trial.run_id, trial.trial_key))
     try:
-        check_before_walking(store, trial, resume, restart, physics, leased=True)
-        store.set_tag(trial.run_id, layout.WALK_MAP_PHYSICS, physics_tag(physics))
+        check_before_walking(store, trial, resume, restart, robot, leased=True)
+        store.set_tag(trial.run_id, layout.WALK_MAP_ROBOT, robot_tag(robot))
         with tempfile.TemporaryDirectory(prefix="linkevo-walkmap-") as tmp:
             table = store.repertoire(trial.run_id, Path(tmp) / "in")
             done = None if restart else store.walk_map(trial.run_id, Path(tmp) / "done")
@@ -288,7 +299,7 @@ def walk_map(
             cells, built = sum(len(b.cells) for b in batches), 0
             last = time.monotonic()
             try:
-                for n_built, new_rows in walk_rows(run, batches, seconds, physics):
+                for n_built, new_rows in walk_rows(run, batches, seconds, robot):
                     rows += new_rows
                     built += n_built
                     if tick is not None and built < cells:

@@ -11,7 +11,6 @@ from typing import TYPE_CHECKING
 from linkevo.hardware.field_trial import log_field_trial
 from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
 from linkevo.sim.robot.field_summary import summary
-from linkevo.sim.robot.hexapod import LEG_SLOTS
 from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.sim.robot.walk_rows import AS_EVOLVED, LEGO_BUILD
 from linkevo.sim.robot.walking import Walk, WalkSettings, field_trials
@@ -40,22 +39,6 @@ FIGURES = (
     "frame_contact_share",
 )
 """The builder's figures of a simulated trial, logged as metrics."""
-
-
-def gait_of(config: RobotConfig) -> tuple[object, dict[str, float]]:
-    """Returns the robot's gait and each slot's phase offset in degrees, from its motors'
-    names (`sim.robot.hexapod.LEG_SLOTS`).
-
-    Raises:
-        ValueError: when the motors' names are not the six slots.
-    """
-    offsets = {m.name: m.phase_deg for m in config.motors}
-    if sorted(offsets) != sorted(LEG_SLOTS):
-        raise ValueError(
-            f"the robot config's motors are named {sorted(offsets)}; the simulation mounts a "
-            f"leg where its motor's name says, so name them {', '.join(LEG_SLOTS)}"
-        )
-    return config.gait, offsets
 
 
 def document_source(path: Path, experiment_id: str) -> SourceLinkage:
@@ -96,8 +79,8 @@ def simulate_source(
     `sim.robot.walking.MODELS`) and the walks; a linkage that does not turn comes back as `breaks`
     with no distances and no walks."""
     genome, mode = from_document(source.document)
-    gait, offsets = gait_of(config)
-    where = config.physics.floor(floor_name)
+    robot = config.robot()
+    where = robot.physics.floor(floor_name)
     try:
         leg = leg_from_genome(genome, mode)
     except LegError as exc:
@@ -118,10 +101,8 @@ def simulate_source(
         where,
         repeats=repeats,
         seed=seed,
-        gait=gait,
-        offsets_deg=offsets,
         settings=WalkSettings(seconds=seconds, model=model),
-        physics=config.physics,
+        robot=robot,
     )
     result = summary(walks, where, seconds)
     result["model"] = model

@@ -279,8 +279,12 @@ def load_model(store: RunStore, run_id: str | None = None) -> tuple[WalkModel, s
         try:
             state = torch.load(path, weights_only=True)
             model = WalkModel.from_state_dict(state)
-        except (ValueError, RuntimeError, OSError) as exc:
-            raise WalkModelError(f"walk model {run_id}'s weights are damaged: {exc}") from exc
+        except Exception as exc:  # torch.load's errors have no common base: a damaged file
+            raise WalkModelError(
+                f"walk model {run_id}'s weights ({layout.WALK_MODEL_PT}) are damaged "
+                f"({type(exc).__name__}: {str(exc)[:200]}); fit a new one with: "
+                "linkevo walkmodel fit RUN_ID|GRID_ID"
+            ) from exc
     if model.n_features != len(FEATURE_NAMES):
         raise WalkModelError(
             f"walk model {run_id} takes {model.n_features} features, not "

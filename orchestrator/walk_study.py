@@ -59,7 +59,7 @@ above its lowest point (`path_traits`' flatness)."""
 
 
 @dataclass(frozen=True)
-class Robot:
+class StudyRobot:
     """One robot of the table: its approach, which draw and robot, and its linkage."""
 
     approach: str
@@ -200,7 +200,7 @@ def choose_robots(
     first: str = "drawn",
     modified: str = "sought",
     progress: Callable[[str], None] = print,
-) -> list[Robot]:
+) -> list[StudyRobot]:
     """Returns the first and the modified robot of each MAP-Elites approach in the grid,
     per drawn trial (module docstring)."""
     runs = latest_per_trial(store.trial_table(grid_id))
@@ -211,6 +211,12 @@ def choose_robots(
     )
     runs = runs[(runs["status"] == "FINISHED") & (runs[fitness_tag] == FITNESS)]
     present = [a for a in MAP_ELITES if (runs[approach_tag] == a).any()]
+    if not present:
+        raise StudyError(
+            f"grid {grid_id} has no finished MAP-Elites trial with {FITNESS}: Table I's robots "
+            f"come from the {FITNESS} repertoires of {', '.join(MAP_ELITES)}; run such a grid "
+            "(configs/paper.toml)"
+        )
     if first == "best":
         chosen = {
             a: runs[runs[approach_tag] == a].sort_values(["metrics.best_loss", key_tag]).head(1)
@@ -236,7 +242,7 @@ def choose_robots(
             regions = select_paths(table, approach)
             start = regions.iloc[int(regions["loss"].to_numpy().argmin())]
             here = (int(start["row"]), int(start["col"]))
-            robots.append(Robot(approach, draw, "first", key, source, here, first))
+            robots.append(StudyRobot(approach, draw, "first", key, source, here, first))
             progress(f"{approach} draw {draw}: first robot {key} (run {run_id}), region {here}")
             near = regions[
                 (np.abs(regions["row"] - here[0]) <= 1)
@@ -251,7 +257,7 @@ def choose_robots(
                 approach, start, near, sources, modified, walk_flat, progress
             )
             spot = (int(near.loc[pick, "row"]), int(near.loc[pick, "col"]))
-            robots.append(Robot(approach, draw, "modified", key, sources[pick], spot, rule))
+            robots.append(StudyRobot(approach, draw, "modified", key, sources[pick], spot, rule))
             progress(f"  modified robot: cell {sources[pick].cell}, region {spot}, {rule}")
     return robots
 

@@ -119,6 +119,8 @@ DEFAULT_WALK_BATCH = 32
 """Candidates per iteration of a walking trial: enough to keep a few evaluator actors busy
 (2-D rejections and repeated legs cost no walk), few enough that a budget of walks is met
 closely."""
+MAX_WALKS = 10_000_000
+"""The most walks a walking trial may be given (about 16 months of one core)."""
 CANDIDATES_PER_WALK = 100
 """A walking trial's guard: it ends after this many candidates per walk in its budget,
 should its search stop proposing legs that can be walked."""

@@ -10,7 +10,6 @@ import numpy as np
 from linkevo.sim.linkage.evaluating import evaluate
 from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.fitness import N_OBJECTIVES
-from linkevo.sim.robot.hexapod import Physics
 from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.result_pool import ResultPool
 from linkevo.workers.trial_spec import resolve_target
@@ -105,7 +104,7 @@ def make_evaluator(
             two_objective=two,
             walkers=walkers,
             surrogate=spec.surrogate,
-            physics=Physics.of(spec.physics),
+            robot=spec.robot(),
         )
     if not actors:
         return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)

@@ -17,7 +17,7 @@ from ray.util.scheduling_strategies import PlacementGroupSchedulingStrategy
 
 from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.genome import validate_genomes
-from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.hexapod import Robot
 from linkevo.sim.robot.walk_fitness import CandidateWalk, walk_candidate
 from linkevo.workers.evaluators import Bar, LocalEvaluator, Pending, Stateless
 
@@ -172,12 +172,12 @@ class WalkWorker:
     """Builds and walks a walking trial's candidates; runs as a Ray actor."""
 
     def walk(
-        self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float, physics: Physics
+        self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float, robot: Robot
     ) -> tuple[CandidateWalk, str]:
         """Returns the candidate's walk (`sim.robot.walk_fitness.walk_candidate`) and this
         actor's Ray node."""
         node = ray.get_runtime_context().get_node_id()
-        return walk_candidate(genome, mode, known, bar, physics=physics), node
+        return walk_candidate(genome, mode, known, bar, robot=robot), node
 
 
 class ActorWalkers:
@@ -207,7 +207,7 @@ class ActorWalkers:
         mode: str,
         known: frozenset[str],
         bars: np.ndarray,
-        physics: Physics,
+        robot: Robot,
     ):
         """Starts every candidate's walk now; yields each (walk, node) in order."""
         from ray.util import ActorPool
@@ -216,7 +216,7 @@ class ActorWalkers:
         pool = ActorPool(self._actors)
         items = list(zip(genomes, bars.tolist(), strict=True))
         return pool.map(
-            lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1], physics), items
+            lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1], robot), items
         )
 
     def close(self) -> None:

@@ -21,6 +21,7 @@ from linkevo.sim.errors import LinkevoError
 from linkevo.sim.robot.walk_rows import LEGO_BUILD, WALK_ORDER, Status
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.runs import NotFound, RunStore
+from linkevo.workers.store.tables import ArtefactError, read_repertoire, read_walk_map
 
 SEED_DIR = "seed"
 """The folder, in a trial's folder, holding its warm start's repertoire and walk map."""
@@ -42,15 +43,21 @@ class Seed:
 
 
 def fetch_seed(store: RunStore, run_id: str, folder: Path) -> Path:
-    """Downloads the run's repertoire and walk map into `folder` (once); returns it.
+    """Downloads the run's repertoire and walk map into `folder` once (a copy there that
+    does not read back whole, a damaged or cut one, is fetched again); returns it.
 
     Raises:
         SeedError: the run has no repertoire or no walk map.
+        ArtefactError: the run's own repertoire or walk map is damaged.
     """
     folder.mkdir(parents=True, exist_ok=True)
-    for name in (layout.REPERTOIRE, layout.WALK_MAP):
+    for name, read in ((layout.REPERTOIRE, _repertoire), (layout.WALK_MAP, _walk_map)):
         if (folder / name).exists():
-            continue
+            try:
+                read(folder, run_id)
+                continue
+            except ArtefactError:
+                (folder / name).unlink()
         try:
             store.download(run_id, name, folder)
         except NotFound as exc:
@@ -58,14 +65,27 @@ def fetch_seed(store: RunStore, run_id: str, folder: Path) -> Path:
                 f"seed_from {run_id!r} has no {name}: a warm start needs a MAP-Elites trial "
                 f"and its walk map (`linkevo walkmap {run_id}` makes one)"
             ) from exc
+        read(folder, run_id)
     return folder
 
 
-def read_seed(folder: Path) -> Seed:
+def _repertoire(folder: Path, run_id: str) -> pd.DataFrame:
+    return read_repertoire(folder / layout.REPERTOIRE, run_id, layout.REPERTOIRE)
+
+
+def _walk_map(folder: Path, run_id: str) -> pd.DataFrame:
+    return read_walk_map(folder / layout.WALK_MAP, run_id)
+
+
+def read_seed(folder: Path, run_id: str = "seed_from") -> Seed:
     """Returns the warm start `fetch_seed` left in `folder`: the cells walked as LEGO
-    legs on both floors, in ascending cell order."""
-    repertoire = pd.read_parquet(folder / layout.REPERTOIRE)
-    walks = pd.read_parquet(folder / layout.WALK_MAP)
+    legs on both floors, in ascending cell order.
+
+    Raises:
+        ArtefactError: a copy that does not read back whole (named with `run_id`).
+    """
+    repertoire = _repertoire(folder, run_id)
+    walks = _walk_map(folder, run_id)
     walks = walks[
         (walks["leg"] == LEGO_BUILD) & walks["status"].isin([Status.WALKED, Status.NOT_WALKED])
     ]

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.hexapod import Robot
 from linkevo.sim.study import (
     APPROACHES,
     CANDIDATES_PER_WALK,
@@ -19,6 +19,7 @@ from linkevo.sim.study import (
     DEFAULT_BATCH,
     DEFAULT_WALK_BATCH,
     MAP_ELITES,
+    MAX_WALKS,
     MIN_ANGLES,
     MODES,
     MULTI_OBJECTIVE,
@@ -74,6 +75,9 @@ class TrialSpec:
             archive (`workers.walk_surrogate`).
         physics: the simulated robot's parameters that differ from the study's robot
             (`sim.robot.hexapod.Physics`), for every walk of the trial (F_w's, `walk_rerank`'s).
+        gait: the gait's settings that differ from the study's (`sim.robot.gait.GaitConfig`).
+        phases: each leg slot's phase offset (degrees) where it differs from the study's
+            tripods (a robot config's motors, `sim.robot.hexapod.Robot`).
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -95,14 +99,16 @@ class TrialSpec:
     seed_from: str = ""
     surrogate: bool = False
     physics: dict = field(default_factory=dict)
+    gait: dict = field(default_factory=dict)
+    phases: dict = field(default_factory=dict)
 
     @classmethod
     def walking(cls, approach: str, walks: int, **settings: object) -> TrialSpec:
         """Returns a walking trial ("Fw") of `walks` walked candidates, `DEFAULT_WALK_BATCH`
         candidates per iteration and at most `CANDIDATES_PER_WALK` per walk (unless
         `batch_size` or `evaluations` say otherwise)."""
-        if not _is_int(walks) or walks < 1:
-            raise TrialSpecError(f"walks must be a positive integer, got {walks!r}")
+        if not _is_int(walks) or not 1 <= walks <= MAX_WALKS:
+            raise TrialSpecError(f"walks must be an integer in [1, {MAX_WALKS:,}], got {walks!r}")
         settings.setdefault("batch_size", DEFAULT_WALK_BATCH)
         settings.setdefault("evaluations", max(walks * CANDIDATES_PER_WALK, settings["batch_size"]))
         return cls(approach, WALKING_FITNESS, walks=walks, **settings)  # type: ignore[arg-type]
@@ -131,8 +137,9 @@ class TrialSpec:
         if not _is_int(self.walk_rerank) or self.walk_rerank < 0:
             fail(f"walk_rerank must be an integer >= 0, got {self.walk_rerank!r}")
         if self.fitness == WALKING_FITNESS:
-            if not _is_int(self.walks) or self.walks < 1:
-                fail(f"walks must be a positive integer for fitness Fw, got {self.walks!r}")
+            if not _is_int(self.walks) or not 1 <= self.walks <= MAX_WALKS:
+                allowed = f"an integer in [1, {MAX_WALKS:,}]"
+                fail(f"walks must be {allowed} for fitness Fw, got {self.walks!r}")
             if self.walk_rerank:
                 fail("walk_rerank is for the path fitnesses: an Fw trial walks every candidate")
         elif self.walks != 0:
@@ -149,10 +156,19 @@ class TrialSpec:
                 f"surrogate = true is for walking trials of a MAP-Elites approach "
                 f"({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
             )
-        if not isinstance(self.physics, dict):
-            fail(f"physics must be a table of numbers, got {self.physics!r}")
+        if self.surrogate:
+            from linkevo.workers.walk_surrogate import START
+
+            if self.walks <= START:
+                fail(
+                    f"surrogate = true with walks = {self.walks}: the walk model is first fitted "
+                    f"after {START} walks, so it would screen none; allowed: walks > {START}"
+                )
+        for part in ("physics", "gait", "phases"):
+            if not isinstance(getattr(self, part), dict):
+                fail(f"{part} must be a table of numbers, got {getattr(self, part)!r}")
         try:
-            Physics.of(self.physics)
+            self.robot()
         except (TypeError, ValueError) as exc:
             fail(str(exc))
         if not _is_int(self.checkpoint_every) or self.checkpoint_every < 1:
@@ -171,6 +187,10 @@ class TrialSpec:
             resolve_target(self.target)
         except ValueError as exc:
             fail(str(exc))
+
+    def robot(self) -> Robot:
+        """Returns the robot the trial's walks walk (`physics`, `gait` and `phases`)."""
+        return Robot.of({"physics": self.physics, "gait": self.gait, "phases": self.phases})
 
     @property
     def walking_trial(self) -> bool:

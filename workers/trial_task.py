@@ -198,7 +198,8 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         )
         seed = None
         if spec.seed_from:
-            seed = read_seed(wait(lambda: fetch_seed(store, spec.seed_from, out_dir / SEED_DIR)))
+            folder = wait(lambda: fetch_seed(store, spec.seed_from, out_dir / SEED_DIR))
+            seed = read_seed(folder, spec.seed_from)
         result = run_trial(spec, evaluator, recorder, out_dir, resume=True, seed=seed)
         wait(lambda: store.set_tag(run_id, layout.STOPPED_BY, result.stopped_by))
     except ServerLost:

@@ -13,7 +13,7 @@ import pandas as pd
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.sim.linkage.physical import physical_checks
-from linkevo.sim.robot.hexapod import FLAT, Physics
+from linkevo.sim.robot.hexapod import FLAT
 from linkevo.sim.robot.walk_rows import COLUMNS, Status
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.run_layout import (
@@ -49,7 +49,7 @@ def rerank_by_walking(spec: TrialSpec, view: dict[str, np.ndarray], out_dir: Pat
     keep = order[physical_checks(batch, simulate(batch, spec.n_angles)).buildable[order]]
     keep = keep[: spec.walk_rerank]
     walked = CellBatch(cells[keep], genomes[keep], spec.mode, (FLAT,))
-    rows = walk_cells(walked, Physics.of(spec.physics))
+    rows = walk_cells(walked, spec.robot())
     distance = np.array([r["mean_distance_cm"] for r in rows], dtype=float)
     sound = np.array([r["status"] == Status.WALKED and not r["breaks"] for r in rows], dtype=bool)
     columns = {c: np.array([r[c] for r in rows]) for c in COLUMNS}

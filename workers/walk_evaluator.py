@@ -28,7 +28,7 @@ from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.genome import validate_genomes
 from linkevo.sim.linkage.kinematics import Motion, simulate, take_rows
 from linkevo.sim.linkage.physical import physical_checks
-from linkevo.sim.robot.hexapod import Physics
+from linkevo.sim.robot.hexapod import Robot
 from linkevo.sim.robot.walk_features import features_of
 from linkevo.sim.robot.walk_fitness import (
     CandidateWalk,
@@ -52,10 +52,10 @@ class Walkers(Protocol):
         mode: str,
         known: frozenset[str],
         bars: np.ndarray,
-        physics: Physics,
+        robot: Robot,
     ) -> Iterator[tuple[CandidateWalk, str]]:
         """Yields each candidate's walk (`sim.robot.walk_fitness.walk_candidate`, legs in
-        `known` not walked, each with its bar (K,), on the robot `physics` describes) and
+        `known` not walked, each with its bar (K,), on `robot`) and
         where it ran, in order."""
         ...
 
@@ -73,11 +73,11 @@ class LocalWalkers:
         mode: str,
         known: frozenset[str],
         bars: np.ndarray,
-        physics: Physics,
+        robot: Robot,
     ):
         host = socket.gethostname()
         for genome, bar in zip(genomes, bars, strict=True):
-            yield walk_candidate(genome, mode, known, float(bar), physics=physics), host
+            yield walk_candidate(genome, mode, known, float(bar), robot=robot), host
 
     def close(self) -> None:
         """Nothing to release."""
@@ -91,7 +91,7 @@ class WalkingEvaluator:
         n_angles: crank angles of the 2-D evaluation.
         two_objective: return each floor's loss (B, 2) rather than the worse one (B,).
         walkers: where candidates are walked (`LocalWalkers`, `ActorWalkers`).
-        physics: the robot's parameters (default: the study's robot).
+        robot: the robot walked (default: the study's robot).
         surrogate: pre-screen the candidates with the learned walk model fitted on the
             trial's walks (`workers.walk_surrogate`); single-objective only.
     """
@@ -103,10 +103,10 @@ class WalkingEvaluator:
         two_objective: bool,
         walkers: Walkers | None = None,
         surrogate: bool = False,
-        physics: Physics | None = None,
+        robot: Robot | None = None,
     ) -> None:
         self.mode = mode
-        self.physics = physics or Physics()
+        self.robot = robot or Robot()
         self.n_angles = n_angles
         self.two_objective = two_objective
         self.walkers = walkers or LocalWalkers()
@@ -161,7 +161,7 @@ class WalkingEvaluator:
             built, skipped = built[worth], built[~worth]
         known = self.log.known()
         walks = self.walkers.walk(
-            genomes[built], self.mode, frozenset(known), bars[built], self.physics
+            genomes[built], self.mode, frozenset(known), bars[built], self.robot
         )
 
         def collect() -> Evaluation:

@@ -39,6 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--out", type=Path, default=None, help="the page (default: reports/explore/REF.html)"
     )
     parser.add_argument("--no-log", action="store_true", help="do not log the page to MLflow")
+    options.force(parser, "replace an existing --out page (the default page is always redrawn)")
     parser.set_defaults(func=handle)
 
 
@@ -53,9 +54,10 @@ def handle(args: argparse.Namespace) -> int:
 
     if args.drawn is not None and args.drawn < 1:
         raise CliError(f"--drawn {args.drawn}: give the number of cells to draw, >= 1")
-    out = args.out if args.out is not None else Path("reports") / "explore" / f"{args.ref}.html"
-    if out.suffix.lower() != ".html" or out.is_dir():
-        raise CliError(f"--out {str(out)!r}: give a file name ending in .html")
+    if args.out is not None:
+        out = options.output_file(args.out, force=args.force, suffix=".html")
+    else:
+        out = options.output_folder(Path("reports") / "explore") / f"{args.ref}.html"
     store = RunStore.open(args.tracking_uri, args.experiment)
     found = store.repertoires(args.ref)
     trials, grid_id, parent = found.trials, found.grid_id, found.parent_run_id

@@ -88,7 +88,13 @@ def run_grid(args: argparse.Namespace) -> int:
         from linkevo.workers.store.tracking import resolve_tracking_uri
 
         trial_specs(grid)  # refuses what the launch would refuse
-        check_store(resolve_tracking_uri(grid.config.tracking_uri or None))
+        uri = resolve_tracking_uri(grid.config.tracking_uri or None)
+        check_store(uri)
+        if grid.config.seed_from:  # the warm start is read as the launch reads it
+            from linkevo.orchestrator.launch_checks import check_seed
+            from linkevo.workers.store.runs import RunStore
+
+            check_seed(RunStore.open(uri, grid.config.experiment), grid.config.seed_from)
         print(describe(grid, dry_run_cluster(args.address)))
         return 0
     from linkevo.orchestrator import driver

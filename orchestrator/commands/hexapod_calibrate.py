@@ -43,6 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--out", required=True, type=Path, help="the calibrated robot config to write (.toml)"
     )
+    options.force(parser)
     parser.add_argument(
         "--folds",
         type=options.count(2, 10),
@@ -77,8 +78,7 @@ def handle(args: argparse.Namespace) -> int:
             f"--params {args.params!r}: {', '.join(bad) or 'each name once'}; allowed: "
             f"{', '.join(CALIBRATED)}"
         )
-    if args.out.suffix != ".toml" or args.out.is_dir():
-        raise CliError(f"--out {args.out}: allowed a .toml file")
+    options.output_file(args.out, force=args.force, suffix=".toml")
     if len(set(args.trials)) != len(args.trials) or len(args.trials) < 2:
         raise CliError(
             f"--trials: {len(args.trials)} given; allowed: at least 2 distinct runs (a fit "

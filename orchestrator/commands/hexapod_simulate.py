@@ -104,8 +104,8 @@ def simulate_handler(args: argparse.Namespace) -> int:
         write_pictures,
     )
 
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {str(args.out)!r} is a file; allowed: a folder (new or existing)")
+    if args.out is not None:
+        options.output_folder(args.out)
     config = load_robot(args)
     uri, source = simulation_source(args)
     result, walks = simulate_source(
@@ -201,8 +201,10 @@ def study_handler(args: argparse.Namespace) -> int:
     from linkevo.workers.store.artifacts import write_text_atomic
     from linkevo.workers.store.runs import RunStore
 
-    if args.out is not None and (args.out.suffix == ".csv" or args.out.is_file()):
-        raise CliError(f"--out {args.out}: allowed a folder (the two tables are written into it)")
+    if args.out is not None:
+        if args.out.suffix == ".csv":
+            raise CliError(f"--out {args.out}: allowed a folder (the two tables go into it)")
+        options.output_folder(args.out)
     config = load_robot(args)
     table = predict_table_one(
         RunStore.open(args.tracking_uri, args.experiment),

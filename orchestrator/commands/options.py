@@ -168,6 +168,66 @@ def robot_config(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--config", type=Path, default=None, help=what)
 
 
+def force(parser: argparse.ArgumentParser, what: str = "replace an existing --out file") -> None:
+    """Adds `--force`: an existing output file is replaced instead of refused."""
+    parser.add_argument("--force", action="store_true", help=what)
+
+
+def _writable(folder: Path, option: str, shown: Path) -> None:
+    """Raises CliError unless a file can be created in `folder` or, where it does not exist
+    yet, in its nearest existing ancestor (tried with a file created and removed: a mode bit
+    or a read-only mount says no alike)."""
+    import tempfile
+
+    from linkevo.orchestrator.cli import CliError
+
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise CliError(f"{option} {str(shown)!r}: {str(existing)!r} is a file, not a folder")
+    try:
+        with tempfile.NamedTemporaryFile(dir=existing, prefix=".linkevo-write-test."):
+            pass
+    except OSError as exc:
+        raise CliError(
+            f"{option} {str(shown)!r}: cannot write in {str(existing)!r} ({exc.strerror}); "
+            "choose a folder you can write to"
+        ) from None
+
+
+def output_folder(path: Path, option: str = "--out") -> Path:
+    """Returns `path` once it is checked as an output folder, before any work: a folder (new
+    or existing) that can be written in.
+
+    Raises:
+        CliError: naming the path and what is wrong.
+    """
+    from linkevo.orchestrator.cli import CliError
+
+    if path.exists() and not path.is_dir():
+        raise CliError(f"{option} {str(path)!r} is a file; allowed: a folder (new or existing)")
+    _writable(path, option, path)
+    return path
+
+
+def output_file(path: Path, *, force: bool, suffix: str, option: str = "--out") -> Path:
+    """Returns `path` once it is checked as an output file, before any work: it ends in
+    `suffix`, its folder can be written in, and it does not exist unless `force`.
+
+    Raises:
+        CliError: naming the path and what is wrong.
+    """
+    from linkevo.orchestrator.cli import CliError
+
+    if path.suffix != suffix or path.is_dir():
+        raise CliError(f"{option} {str(path)!r}: allowed a {suffix} file")
+    if path.exists() and not force:
+        raise CliError(f"{option} {str(path)!r} exists; add --force to replace it")
+    _writable(path.parent, option, path)
+    return path
+
+
 def linkevo_command(*words: str) -> str:
     """Returns a linkevo command line, quoted for a shell, as the user can run it: `linkevo`
     when that name finds this program, else its path (an environment that is not

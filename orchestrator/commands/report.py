@@ -60,6 +60,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     compare.add_argument(
         "--out", type=Path, default=None, help="also write the table to this CSV (default: none)"
     )
+    options.force(compare)
     compare.set_defaults(func=compare_handler)
 
 
@@ -76,8 +77,8 @@ def handler(args: argparse.Namespace) -> int:
         )
     if args.trials is not None and args.trials < 1:
         raise CliError(f"--trials {args.trials} is invalid; allowed: an integer >= 1")
-    if args.out is not None and args.out.exists() and not args.out.is_dir():
-        raise CliError(f"--out {str(args.out)!r} is a file; allowed: a folder (new or existing)")
+    if args.out is not None:
+        options.output_folder(args.out)
     uri = require_store(resolve_tracking_uri(args.tracking_uri))
     try:
         result = build_report(
@@ -106,6 +107,8 @@ def compare_handler(args: argparse.Namespace) -> int:
     from linkevo.workers.store.artifacts import write_text_atomic
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
+    if args.out is not None:
+        options.output_file(args.out, force=args.force, suffix=".csv")
     uri = None
     for grid in (args.grid_a, args.grid_b):
         if is_trials_csv(grid):

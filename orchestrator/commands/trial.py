@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -62,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--config",
         type=Path,
         default=None,
-        help="robot TOML whose [physics] the walks of an Fw trial use ("
+        help="robot TOML whose [physics], [gait] and motors' phases the walks of an Fw trial "
+        "use ("
         "default: the study's robot, as the shipped configs/hexapod.toml)",
     )
     parser.add_argument(
@@ -113,14 +112,7 @@ def parse_options(items: list[str]) -> dict[str, object]:
 
 def check_out_dir(out: Path, resume: bool) -> None:
     """Checks that DIR can be written, and that it holds no trial unless resuming."""
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=out, prefix=".write-test."):
-            pass
-    except OSError as exc:
-        raise CliError(f"output folder {str(out)!r} is not writable: {exc.strerror}") from exc
-    if not os.access(out, os.W_OK | os.X_OK):
-        raise CliError(f"output folder {str(out)!r} is not writable")
+    options.output_folder(out)
     if not resume and ((out / METRICS_FILE).exists() or (out / CHECKPOINT_DIR).exists()):
         raise CliError(
             f"output folder {str(out)!r} already holds a trial; pass --resume to continue it "
@@ -132,22 +124,24 @@ def handle(args: argparse.Namespace) -> int:
     """Validates everything, runs the trial, prints where the results are."""
     from linkevo.workers.evaluators import make_evaluator
     from linkevo.workers.recorders import ProgressRecorder
+    from linkevo.workers.store.artifacts import writer_lock
     from linkevo.workers.trial import run_trial
 
     spec = trial_spec(args)
     check_out_dir(args.out, args.resume)
     walking = spec.walking_trial
-    recorder = ProgressRecorder(
-        spec.walks if walking else spec.evaluations,
-        unit="walk" if walking else "eval",
-        counter="walks" if walking else "evaluations",
-        disable=args.no_progress,
-    )
-    try:
-        with make_evaluator(spec) as evaluator:
-            result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
-    finally:
-        recorder.close()
+    with writer_lock(args.out, "linkevo trial"):  # one trial writes a folder at a time
+        recorder = ProgressRecorder(
+            spec.walks if walking else spec.evaluations,
+            unit="walk" if walking else "eval",
+            counter="walks" if walking else "evaluations",
+            disable=args.no_progress,
+        )
+        try:
+            with make_evaluator(spec) as evaluator:
+                result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
+        finally:
+            recorder.close()
     spent = f"{result.evaluations} evaluations"
     if walking:
         spent = f"{int(result.metrics['walks'])} walks ({result.evaluations} candidates)"
@@ -175,7 +169,8 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
     if args.config is not None:
         from linkevo.orchestrator.commands.hexapod import load_robot
 
-        settings["physics"] = load_robot(args).physics.changed()
+        robot = load_robot(args).robot().changed()
+        settings |= {part: robot.get(part, {}) for part in ("physics", "gait", "phases")}
     if args.batch_size is not None:
         settings["batch_size"] = args.batch_size
     try:

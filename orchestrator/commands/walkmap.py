@@ -4,9 +4,9 @@ a grid) walked on the simulated robot, fanned out over Ray."""
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 
+from linkevo.orchestrator.cli import interrupted_code
 from linkevo.orchestrator.commands import options
 from linkevo.orchestrator.commands.hexapod import load_robot
 from linkevo.sim.robot.hexapod import FLOORS
@@ -73,11 +73,11 @@ def handle(args: argparse.Namespace) -> int:
 
     selection = Selection.parse(args.cells)
     floors = tuple(FLOORS) if args.floor == BOTH else (args.floor,)
-    physics = load_robot(args).physics
+    robot = load_robot(args).robot()
     store = RunStore.open(args.tracking_uri, args.experiment)
     trials = store.repertoires(args.ref).trials
     for trial in trials:  # before Ray starts or anything is walked
-        check_before_walking(store, trial, args.resume, args.restart, physics)
+        check_before_walking(store, trial, args.resume, args.restart, robot)
 
     import ray
 
@@ -86,7 +86,6 @@ def handle(args: argparse.Namespace) -> int:
 
     started = connect_ray(args.address, Cluster.this_machine())
     in_flight = 2 * int(Cluster.of_ray().total_cpus)
-    previous = signal.signal(signal.SIGTERM, _interrupt)  # SIGTERM stops as Ctrl-C does
     try:
         for trial in trials:
             bars: dict[str, tqdm] = {}
@@ -113,10 +112,10 @@ def handle(args: argparse.Namespace) -> int:
                     resume=args.resume,
                     restart=args.restart,
                     seconds=args.seconds,
-                    physics=physics,
+                    robot=robot,
                     tick=tick,
                 )
-            except KeyboardInterrupt:
+            except KeyboardInterrupt as exc:
                 for bar in bars.values():
                     bar.close()
                 print(
@@ -124,7 +123,7 @@ def handle(args: argparse.Namespace) -> int:
                     f"the map with:  {_resume_command(args)}",
                     file=sys.stderr,
                 )
-                return 130
+                return interrupted_code(exc)
             finally:
                 for bar in bars.values():
                     bar.close()
@@ -132,14 +131,9 @@ def handle(args: argparse.Namespace) -> int:
                 print(f"{trial.trial_key} (run {trial.run_id}): the walk map is complete")
             print(summary(trial, result.frame))
     finally:
-        signal.signal(signal.SIGTERM, previous)
         if started:
             ray.shutdown()
     return 0
-
-
-def _interrupt(signum, frame) -> None:
-    raise KeyboardInterrupt
 
 
 def _resume_command(args: argparse.Namespace) -> str:

@@ -11,6 +11,7 @@ into its motor model's speed goal.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -29,8 +30,11 @@ def limits(
 
 def range_error(key: str, value: float, meta: dict) -> str | None:
     """Returns what is wrong with `value` against a field's `limits` ("KEY = VALUE is out
-    of range [LOW, HIGH]"), or None when it is within them."""
+    of range [LOW, HIGH]", or "... is not a finite number" for NaN and infinities, which
+    every comparison would let through), or None when it is within them."""
     low, high = meta.get("low"), meta.get("high")
+    if not math.isfinite(value):
+        return f"{key} = {value!r} is not a finite number"
     too_high = high is not None and (value >= high if meta["open_high"] else value > high)
     if (low is not None and value < low) or too_high:
         bracket = ")" if meta.get("open_high") else "]"
@@ -51,6 +55,10 @@ class GaitConfig:
     integral_limit_rpm: float = field(default=10.0, metadata=limits(0.0))
     integral_band_deg: float = field(default=15.0, metadata=limits(0.0, 180.0))
     max_lag_s: float = field(default=0.25, metadata=limits(0.0))
+
+
+GAIT_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(GaitConfig))
+"""The names `[gait]` and a grid's `gait` table accept."""
 
 
 def wrap(angle: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from linkevo.sim.robot.gait import limits, range_error
+from linkevo.sim.robot.gait import GaitConfig, limits, range_error
 
 ROBOT_MODELS: tuple[str, ...] = ("lean", "full")
 """The MuJoCo models of the robot a walk can run on (`sim.robot.walking.MODELS`): lean, the
@@ -255,3 +255,79 @@ class Physics:
 
 PHYSICS_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Physics))
 """The names `[physics]`, `--params` and a grid's `physics` table accept."""
+
+
+@dataclass(frozen=True)
+class Robot:
+    """The robot a walk walks, whole as its robot config describes it (`hardware.config`,
+    `RobotConfig.robot`): its physics (frame, motor, floors), its gait (speed and PID) and
+    each slot's phase offset (the tripods; from the motors' names and `phase_deg`).
+
+    Every command that walks reads all three alike: `hexapod simulate`, `study` and
+    `calibrate`, walk maps and walking trials. The defaults are the study's robot.
+    """
+
+    physics: Physics = field(default_factory=Physics)
+    gait: GaitConfig = field(default_factory=GaitConfig)
+    phases_deg: dict[str, float] = field(default_factory=lambda: dict(TRIPOD_OFFSETS_DEG))
+
+    def __post_init__(self) -> None:
+        if sorted(self.phases_deg) != sorted(LEG_SLOTS):
+            raise ValueError(
+                f"the robot's legs are named {sorted(self.phases_deg)}; a leg is mounted where "
+                f"its motor's name says, so name the six {', '.join(LEG_SLOTS)}"
+            )
+        for slot, value in self.phases_deg.items():
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise ValueError(f"{slot} phase_deg = {value!r}: allowed a number")
+            wrong = range_error(
+                f"{slot} phase_deg", float(value), limits(0.0, 360.0, open_high=True)
+            )
+            if wrong:
+                raise ValueError(wrong)
+
+    def changed(self) -> dict[str, dict[str, float]]:
+        """Returns what differs from the study's robot, by part ("physics", "gait",
+        "phases"; a part with no change left out): what identifies another robot, as a
+        walk map's tag and a trial's settings record it."""
+        default = GaitConfig()
+        parts = {
+            "physics": self.physics.changed(),
+            "gait": {
+                f.name: getattr(self.gait, f.name)
+                for f in dataclasses.fields(GaitConfig)
+                if getattr(self.gait, f.name) != getattr(default, f.name)
+            },
+            "phases": {s: v for s, v in self.phases_deg.items() if v != TRIPOD_OFFSETS_DEG[s]},
+        }
+        return {k: v for k, v in parts.items() if v}
+
+    @classmethod
+    def of(cls, changed: dict) -> Robot:
+        """Returns the robot `changed` describes (`Robot.changed`'s form).
+
+        Raises:
+            ValueError: naming an unknown part, key or a value out of its range.
+        """
+        unknown = sorted(set(changed) - {"physics", "gait", "phases"})
+        if unknown:
+            raise ValueError(f"robot: unknown part(s) {unknown}; allowed: physics, gait, phases")
+        gait = changed.get("gait", {})
+        names = [f.name for f in dataclasses.fields(GaitConfig)]
+        if sorted(set(gait) - set(names)):
+            raise ValueError(
+                f"gait: unknown key(s) {sorted(set(gait) - set(names))}; allowed: {names}"
+            )
+        for f in dataclasses.fields(GaitConfig):
+            if f.name in gait:
+                value = gait[f.name]
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise ValueError(f"gait {f.name} = {value!r}: allowed a number")
+                wrong = range_error(f.name, float(value), f.metadata)
+                if wrong:
+                    raise ValueError(f"gait {wrong}")
+        return cls(
+            physics=Physics.of(changed.get("physics", {})),
+            gait=GaitConfig(**{k: float(v) for k, v in gait.items()}),
+            phases_deg={**TRIPOD_OFFSETS_DEG, **changed.get("phases", {})},
+        )

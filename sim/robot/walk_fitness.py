@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, PhysicalChecks
-from linkevo.sim.robot.hexapod import FLOORS, Physics
+from linkevo.sim.robot.hexapod import FLOORS, Robot
 from linkevo.sim.robot.leg import LegError, recipe_and_leg
 from linkevo.sim.robot.walk_map import walk_map_settings
 from linkevo.sim.robot.walk_rows import (
@@ -107,7 +107,7 @@ def walk_candidate(
     known: Container[str] = (),
     bar: float = math.inf,
     seconds: float = SEARCH_SECONDS,
-    physics: Physics | None = None,
+    robot: Robot | None = None,
 ) -> CandidateWalk:
     """Builds a candidate's LEGO leg and walks it: carpet, then flat unless it broke there
     or its carpet loss alone is at or above `bar`.
@@ -121,7 +121,7 @@ def walk_candidate(
             (`algorithms.Optimizer.bar`): F_w is the worse floor's loss, so once the first
             floor's is at or above it the second cannot matter and is not walked.
         seconds: each walk's length.
-        physics: the robot's parameters (default: the study's robot).
+        robot: the robot walked (default: the study's robot).
     """
     start = time.perf_counter()
     base = {"cell": -1, "seconds": float(seconds)}
@@ -162,7 +162,7 @@ def walk_candidate(
             rows.append(map_row(base, floor, Status.NOT_WALKED, reason=reason, leg=LEGO_BUILD))
             continue
         try:
-            w = walk(leg, FLOORS[floor], settings=settings, physics=physics)
+            w = walk(leg, FLOORS[floor], settings=settings, robot=robot)
         except Exception as exc:  # recorded per candidate, the batch goes on
             failed = [map_row(base, f, Status.FAILED, reason=error_text(exc)) for f in WALK_ORDER]
             return done(Stage.FAILED, recipe.key, failed)

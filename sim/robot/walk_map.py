@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS, Physics
+from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS, Robot
 from linkevo.sim.robot.leg import LegError, LegRecipe, leg_recipe
 from linkevo.sim.robot.walk_rows import (
     AS_EVOLVED,
@@ -71,7 +71,7 @@ class LegBatch:
     recipes: dict[str, LegRecipe]
     floors: tuple[str, ...]
     seconds: float = WALK_SECONDS
-    physics: Physics = field(default_factory=Physics)
+    robot: Robot = field(default_factory=Robot)
 
 
 def walk_map_settings(seconds: float = WALK_SECONDS) -> WalkSettings:
@@ -130,7 +130,7 @@ def walk_legs(batch: LegBatch) -> dict[str, list[WalkRow]]:
         rows = []
         for floor in batch.floors:
             try:
-                w = walk(leg, FLOORS[floor], settings=settings, physics=batch.physics)
+                w = walk(leg, FLOORS[floor], settings=settings, robot=batch.robot)
             except Exception as exc:  # recorded per leg and floor
                 rows.append(map_row(base, floor, Status.FAILED, reason=error_text(exc), leg=kind))
                 continue
@@ -165,10 +165,10 @@ def rows_for_cells(rows: list[WalkRow], cells: list[int]) -> list[WalkRow]:
 
 
 def leg_batches(
-    legs: list[LegToWalk], seconds: float, per_task: int, physics: Physics
+    legs: list[LegToWalk], seconds: float, per_task: int, robot: Robot
 ) -> list[LegBatch]:
     """Returns the walk tasks of distinct legs (`group_legs`), `per_task` legs on the same
-    floors each, walked on the robot `physics` describes; a leg is named by its index in
+    floors each, walked on `robot`; a leg is named by its index in
     `legs`."""
     by_floors: dict[tuple[str, ...], list[int]] = {}
     for i, leg in enumerate(legs):
@@ -177,7 +177,7 @@ def leg_batches(
     for floors, index in by_floors.items():
         for start in range(0, len(index), per_task):
             named = {str(i): legs[i].recipe for i in index[start : start + per_task]}
-            out.append(LegBatch(named, floors, seconds, physics))
+            out.append(LegBatch(named, floors, seconds, robot))
     return out
 
 
@@ -186,7 +186,7 @@ def walk_rows(
     batches: list[CellBatch],
     seconds: float,
     legs_per_task: int,
-    physics: Physics | None = None,
+    robot: Robot | None = None,
 ) -> Iterator[tuple[int, list[WalkRow]]]:
     """Yields, as each task ends, how many cells it built and the rows it settled: while
     the legs are built, the rows of the cells that are not walked; then each distinct
@@ -198,23 +198,23 @@ def walk_rows(
         batches: the cells.
         seconds: each walk's length.
         legs_per_task: distinct legs per walk task.
-        physics: the robot's parameters (default: the study's robot).
+        robot: the robot walked (default: the study's robot).
     """
     built = []
     for cells in run(build_cells, batches):
         yield len(cells), [r for b in cells for r in b.rows]
         built += [b for b in cells if b.recipe is not None]
     legs = group_legs(built)
-    tasks = leg_batches(legs, seconds, legs_per_task, physics or Physics())
+    tasks = leg_batches(legs, seconds, legs_per_task, robot or Robot())
     for walked in run(walk_legs, tasks):
         for name, leg_rows in walked.items():
             yield 0, rows_for_cells(leg_rows, legs[int(name)].cells)
 
 
-def walk_cells(batch: CellBatch, physics: Physics | None = None) -> list[WalkRow]:
+def walk_cells(batch: CellBatch, robot: Robot | None = None) -> list[WalkRow]:
     """Returns a row (`COLUMNS`) per cell and floor of the batch, walked in this process
-    (`walk_rows` with every leg in one task) on the robot `physics` describes."""
+    (`walk_rows` with every leg in one task) on `robot` (default: the study's)."""
     legs = max(1, len(batch.cells))
-    rows = [r for _, part in walk_rows(map, [batch], batch.seconds, legs, physics) for r in part]
+    rows = [r for _, part in walk_rows(map, [batch], batch.seconds, legs, robot) for r in part]
     cell_order = {int(c): i for i, c in enumerate(batch.cells)}
     return sorted(rows, key=lambda r: (cell_order[r["cell"]], batch.floors.index(r["floor"])))

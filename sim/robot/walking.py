@@ -34,6 +34,7 @@ from linkevo.sim.robot.hexapod import (
     Frame,
     Motor,
     Physics,
+    Robot,
 )
 from linkevo.sim.robot.lean_model import LEAN_TIMESTEP_S, build_lean_robot
 from linkevo.sim.robot.leg import Leg
@@ -163,6 +164,7 @@ def walk(
     frame: Frame | None = None,
     motor: Motor | None = None,
     physics: Physics | None = None,
+    robot: Robot | None = None,
 ) -> Walk:
     """Walks the robot once and returns what happened.
 
@@ -176,7 +178,11 @@ def walk(
         frame, motor: the chassis and motor (defaults: the study's robot).
         physics: a robot's own parameters (`sim.robot.hexapod.Physics`): its floor, frame and
             motor replace `floor`'s contact, `frame` and `motor`.
+        robot: a robot whole (`sim.robot.hexapod.Robot`: its physics, gait and phases),
+            in place of `physics`, `gait` and `offsets_deg`.
     """
+    if robot is not None:
+        physics, gait, offsets_deg = robot.physics, robot.gait, robot.phases_deg
     if physics is not None:
         floor, frame, motor = physics.floor(floor.name), physics.frame(), physics.motor()
     gait = gait or GaitConfig()

@@ -100,7 +100,7 @@ def test_cli_refuses_an_unwritable_folder(
         ["--approach", "EA", "--fitness", "Fp", "--out", str(out), *SMALL], capsys
     )
     assert code == 2
-    assert f"output folder {str(out)!r} is not writable" in err
+    assert f"--out {str(out)!r}: {str(blocker)!r} is a file, not a folder" in err
 
 
 def _damage_truncated_state(out: Path) -> str:

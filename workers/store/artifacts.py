@@ -16,6 +16,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from linkevo.sim.errors import LinkevoError
+
 TEMP_INFIX = ".tmp-"
 """Marks a temporary file: `.<stem>.tmp-<host>-<pid>-<random><suffix>` beside its target."""
 
@@ -36,6 +38,49 @@ def process_alive(pid: int) -> bool:
     except PermissionError:
         return True
     return True
+
+
+WRITER_LOCK = ".linkevo-writer.lock"
+"""The file of a folder's writer lock (`writer_lock`)."""
+
+
+class FolderBusy(LinkevoError):
+    """Another process writes the folder; the message names it."""
+
+
+@contextmanager
+def writer_lock(folder: Path, what: str) -> Iterator[None]:
+    """Holds the folder's writer lock while the block runs: one process at a time writes a
+    trial's folder. The lock is the kernel's (`fcntl.flock` on `WRITER_LOCK`), so a writer
+    that dies frees it at once; the file names the holder for the refusal.
+
+    Raises:
+        FolderBusy: another process holds it (named, with what to do).
+    """
+    import fcntl
+    import time
+
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / WRITER_LOCK
+    with open(path, "a+", encoding="utf-8") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            holder = handle.read().strip() or "another process"
+            raise FolderBusy(
+                f"{str(folder)!r} is being written by {holder} ({what}); wait for it to end or "
+                "stop it, then --resume"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        since = time.strftime("%Y-%m-%d %H:%M:%S")
+        handle.write(f"pid {os.getpid()} on {socket.gethostname()} since {since}\n")
+        handle.flush()
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 def sweep_stale_temps(path: Path) -> list[Path]:

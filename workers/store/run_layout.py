@@ -102,9 +102,12 @@ WALK_MAP = "walkmap.parquet"
 plus the cell's bins), logged by `linkevo walkmap`, or by a walking trial (fitness F_w)
 itself."""
 WALK_MAP_PNG = "walkmap.png"
+WALK_MAP_ROBOT = "walk_map_robot"
+"""The tag of a run with a walk map: what the walked robot changes from the study's, by part
+(physics, gait, phases; `sim.robot.hexapod.Robot.changed`), as JSON; "{}" for the study's
+robot."""
 WALK_MAP_PHYSICS = "walk_map_physics"
-"""The tag of a run with a walk map: the walked robot's parameters that differ from the
-study's (`sim.robot.hexapod.Physics.changed`), as JSON; "{}" for the study's robot."""
+"""An older linkevo's tag of a walk map's robot: its physics alone (read, never written)."""
 WALK_PREDICTION = "walkpred.parquet"
 """A repertoire trial's predicted walks (`linkevo walkmodel predict`): a row per filled cell
 and floor (`workers.store.tables.PREDICTION_COLUMNS` plus the cell's bins); the run's tag
