@@ -128,7 +128,8 @@ def test_bad_config_is_a_usage_error_naming_the_value(tmp_path, capsys):
 def test_non_positive_seconds_is_refused(seconds, config_file, capsys):
     code = main(["hexapod", "walk", "--config", str(config_file("x")), "--seconds", seconds])
     assert code == 2
-    assert f"--seconds: '{seconds}' is not allowed: a positive number" in capsys.readouterr().err
+    said = capsys.readouterr().err
+    assert f"--seconds: '{seconds}' is not allowed: a number of seconds in (0, 600]" in said
 
 
 def test_unreachable_port_is_reported(config_file, capsys):
