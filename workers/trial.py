@@ -41,7 +41,7 @@ from linkevo.workers.store.run_layout import (
     SETTINGS_FILE,
 )
 from linkevo.workers.trial_spec import TrialSpec, build_optimizer, resolve_target
-from linkevo.workers.trial_walks import rerank_by_walking, write_walk_tables
+from linkevo.workers.trial_walks import confirm_best_walker, rerank_by_walking, write_walk_tables
 
 FLOAT32_COLUMNS: tuple[str, ...] = ("foot_x", "foot_y")
 """Repertoire columns stored as float32: the foot paths, for drawing and inspection, are
@@ -341,9 +341,14 @@ def _finish(
     state = optimizer.state_dict() | evaluator.state_dict()
     _checkpoint(spec, state, optimizer, optimizer.iteration, folder)
     best_loss, view = _write_final(spec, optimizer, out_dir)
-    if spec.walking_trial:
-        write_walk_tables(evaluator.log, view, spec, out_dir)  # type: ignore[attr-defined]
     metrics = optimizer.metrics() | evaluator.metrics()
+    if spec.walking_trial:
+        log = evaluator.log  # type: ignore[attr-defined]
+        write_walk_tables(log, view, spec, out_dir)
+        confirmed = confirm_best_walker(spec, log, *optimizer.best(), out_dir)
+        if confirmed:
+            recorder.log_iteration(optimizer.iteration, confirmed)
+        metrics |= confirmed
     metrics["path_diversity"] = (
         path_diversity(view["foot_x"], view["foot_y"], view["loss"]) if view else math.nan
     )

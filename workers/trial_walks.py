@@ -1,6 +1,6 @@
 """Provides what a trial walks, or writes of its walks, at its end: the re-ranking walks
-of a path trial (`walk_rerank`) and a walking trial's walk tables (`walks.parquet`, and for
-a repertoire its walk map)."""
+of a path trial (`walk_rerank`), a walking trial's walk tables (`walks.parquet`, and for
+a repertoire its walk map) and its best walker confirmed on the full model."""
 
 from __future__ import annotations
 
@@ -14,9 +14,10 @@ from linkevo.sim import decode, simulate
 from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.hexapod import FLAT
-from linkevo.sim.robot.walk_rows import COLUMNS, Status
+from linkevo.sim.robot.walk_rows import COLUMNS, Status, credited_cm
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.run_layout import (
+    BEST_CONFIRMED,
     BEST_WALKER,
     WALK_LOG,
     WALK_MAP,
@@ -80,3 +81,33 @@ def write_walk_tables(log: WalkLog, view: dict[str, np.ndarray], spec: TrialSpec
     write_parquet_atomic(out_dir / WALK_MAP, {c: frame[c].to_numpy() for c in frame.columns})
     title = f"{spec.approach} F_w, seed {spec.seed}"
     draw_walk_map(frame, spec.approach, title, out_dir / WALK_MAP_PNG)
+
+
+def confirm_best_walker(
+    spec: TrialSpec, log: WalkLog, genome: np.ndarray, loss: float, out_dir: Path
+) -> dict[str, float]:
+    """Walks a walking trial's best linkage again on the full model from hand-placed starts
+    (`sim.robot.confirmation`), writes `best_confirmed.json` and returns its metrics: each
+    floor's full-model mean credited distance (`best_full_<floor>_cm`), whether the two
+    models agree (`best_models_agree`, 1 or 0) and whether the full model's repeats disagree
+    widely (`best_chaotic`). A best that does not walk soundly on both floors (its loss in
+    the broken tiers) has nothing to confirm: {}."""
+    from linkevo.sim.robot.confirmation import confirm_walk  # MuJoCo: only when asked
+    from linkevo.sim.robot.leg import leg_from_genome
+    from linkevo.sim.robot.walk_fitness import SOUND_BELOW
+
+    if not loss < SOUND_BELOW:
+        return {}
+    at = [i for i in range(len(log)) if np.array_equal(log.genome[i], genome)]
+    rows = log.rows(at[-1]) if at else {}
+    lean = {
+        floor: credited_cm(row) if row["status"] == Status.WALKED and not row["breaks"] else None
+        for floor, row in rows.items()
+    }
+    confirmed = confirm_walk(leg_from_genome(genome, spec.mode), lean, spec.robot())
+    write_json_atomic(out_dir / BEST_CONFIRMED, {"genome": genome.tolist(), **confirmed.as_dict()})
+    metrics = {f"best_full_{f.floor}_cm": f.full_mean_cm for f in confirmed.floors}
+    return metrics | {
+        "best_models_agree": float(confirmed.agrees),
+        "best_chaotic": float(confirmed.chaotic),
+    }

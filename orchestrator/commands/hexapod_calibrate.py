@@ -47,8 +47,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument(
         "--folds",
         type=options.count(2, 10),
-        default=5,
-        help="k of the k-fold cross-validation (at most the number of trials)",
+        default=None,
+        help="at most this many folds of whole legs (default: one leg per fold, leave-one-leg-out)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     options.robot_config(parser)
@@ -81,8 +81,8 @@ def handle(args: argparse.Namespace) -> int:
     options.output_file(args.out, force=args.force, suffix=".toml")
     if len(set(args.trials)) != len(args.trials) or len(args.trials) < 2:
         raise CliError(
-            f"--trials: {len(args.trials)} given; allowed: at least 2 distinct runs (a fit "
-            "and a held-out error)"
+            f"--trials: {len(args.trials)} given; allowed: at least 2 distinct runs of at "
+            "least two legs (a fit, and an error on a leg the fit did not see)"
         )
     from linkevo.configs import shipped
 
@@ -90,11 +90,20 @@ def handle(args: argparse.Namespace) -> int:
     base = args.config or shipped("hexapod.toml")
     store = RunStore.open(args.tracking_uri, args.experiment)
     trials = read_field_trials(store, args.trials)
+    if len({t.leg for t in trials}) < 2:
+        raise CliError(
+            "--trials: every trial walked the same leg; allowed: trials of at least two legs "
+            "(the prediction error is measured on a leg the fit did not see)"
+        )
     say = (lambda _: None) if args.json else print
     result = calibrate(config, trials, names, folds=args.folds, progress=say)
+    by_leg = ", ".join(f"{v:.1f}" for v in result.heldout_by_leg.values())
     note = (
-        f"calibrated by linkevo hexapod calibrate from {len(trials)} field trials; "
-        f"held-out RMSE {result.heldout_rmse_cm:.1f} cm ({result.folds}-fold)"
+        f"calibrated by linkevo hexapod calibrate from {len(trials)} field trials of "
+        f"{result.folds} legs; identified: {', '.join(result.identified) or 'none'}; not "
+        f"identified (left as they were): {', '.join(result.unidentified) or 'none'}; "
+        f"prediction error on legs the fit did not see {result.heldout_rmse_cm:.1f} cm RMS "
+        f"(by leg: {by_leg}; {result.heldout_start_cm:.1f} cm uncalibrated)"
     )
     text = config_text(Path(base).read_text(encoding="utf-8"), config, result, note)
     written = parse_config(tomllib.loads(text), str(args.out))
@@ -107,9 +116,14 @@ def handle(args: argparse.Namespace) -> int:
         "config": str(args.out),
         "params": result.values,
         "start": result.start,
+        "identified": result.identified,
+        "not_identified": result.unidentified,
+        "intervals": {n: list(p.interval) for n, p in result.profiles.items()},
         "rmse_cm": round(result.rmse_cm, 2),
         "rmse_start_cm": round(result.rmse_start_cm, 2),
         "heldout_rmse_cm": round(result.heldout_rmse_cm, 2),
+        "heldout_start_cm": round(result.heldout_start_cm, 2),
+        "heldout_by_leg": {k: round(v, 2) for k, v in result.heldout_by_leg.items()},
         "folds": result.folds,
         "trials": len(trials),
         "walks": result.walks,
@@ -126,12 +140,23 @@ def handle(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(report))
         return 0
-    for name, value in result.values.items():
-        print(f"  {name}: {result.start[name]:g} -> {value:.4g}")
+    for name, found in result.profiles.items():
+        low, high = found.interval
+        if found.identified:
+            print(
+                f"  {name}: {result.start[name]:g} -> {result.values[name]:.4g} "
+                f"(95 % interval {low:.4g} to {high:.4g})"
+            )
+        else:
+            print(
+                f"  {name}: not identified by these trials (anything from {low:.4g} to "
+                f"{high:.4g} fits them); left at {result.start[name]:g}"
+            )
     print(
         f"RMSE over {len(trials)} trials: {result.rmse_start_cm:.1f} cm before, "
-        f"{result.rmse_cm:.1f} cm fitted; held out ({result.folds}-fold): "
-        f"{result.heldout_rmse_cm:.1f} cm"
+        f"{result.rmse_cm:.1f} cm fitted; on legs the fit did not see (leave-one-leg-out, "
+        f"{result.folds} legs): {result.heldout_rmse_cm:.1f} cm, "
+        f"{result.heldout_start_cm:.1f} cm uncalibrated"
     )
     print(f"config: {args.out} (give it with --config)")
     return 0

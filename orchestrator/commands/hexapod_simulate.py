@@ -179,10 +179,12 @@ def _simulation_text(source, robot: str, result: dict) -> str:
         )
     frail = result.get("frailty")
     if frail:
+        low, mid, high = frail["give_mm"]
         lines.append(
-            f"  frailty: the foot gives {frail['foot_deflection_mm']} mm under the robot's "
-            f"weight (splay {frail['splay_mm']}, sag {frail['sag_mm']}); pins levered out of "
-            f"the plane by up to {frail['pin_moment_nmm']} N·mm"
+            f"  frailty: {frail['verdict']}; the foot gives {mid} mm ({low}-{high} over the "
+            f"ranges of E, section and pin play) under the robot's weight, against a lift of "
+            f"{frail['lift_mm']} mm; beams stressed to {frail['stress_mpa'][1]} MPa; pins "
+            f"bent out of the plane by {frail['pin_moment_nmm'][1]} N·mm"
         )
     for caveat in result.get("caveats", []):
         lines.append(f"  caveat: {caveat}")

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 
 from linkevo.orchestrator.cli import CliError
 from linkevo.orchestrator.commands import options
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER
 from linkevo.sim.study import (
     APPROACHES,
     CANDIDATES_PER_WALK,
@@ -150,7 +151,20 @@ def handle(args: argparse.Namespace) -> int:
         f"({result.iterations} iterations, {result.seconds:.1f} s, stopped by "
         f"{result.stopped_by}); files in {args.out}"
     )
+    if "best_models_agree" in result.metrics:
+        print(confirmation_line(result.metrics))
     return 0
+
+
+def confirmation_line(metrics: dict[str, float]) -> str:
+    """The best walker's walks on the full model in one line (`best_confirmed.json`)."""
+    full = ", ".join(f"{f} {metrics[f'best_full_{f}_cm']:.1f} cm" for f in FLOOR_ORDER)
+    verdict = "agrees" if metrics["best_models_agree"] else "DISAGREES with the lean model"
+    chaos = "; a chaotic gait (its repeats disagree widely)" if metrics["best_chaotic"] else ""
+    return (
+        f"best walker on the full model, 5 hand-placed starts per floor: {full} per 10 s; "
+        f"{verdict}{chaos} (best_confirmed.json)"
+    )
 
 
 def trial_spec(args: argparse.Namespace) -> TrialSpec:

@@ -25,6 +25,12 @@ STALL_SATURATED = 0.05
 FRAME_DRAG_SHARE = 0.2
 """The frame touching the floor for more than this share of the walk: the legs cannot
 carry it."""
+INVALID_DEVIATION_MM = 10.0
+"""A walk whose feet stray further than this from where their linkage puts them came apart:
+the model did not hold the legs together (a foot 10 mm off its path is a module and a
+quarter; a walk that holds together keeps its feet within about 1 mm, `LOOP_ERROR_BOUND_MM`
+of `sim.robot.walking`). Such a walk is invalid: it breaks with that reason and has no
+distance (docs/walking.md, "Where the lean model breaks down")."""
 PIN_FORCE_LIMIT_N = 60.0
 """The 99th-percentile pin force above which a LEGO Technic pin joint is taken to fail
 (beams spread and the pin walks out); an estimate, see docs/walking.md."""
@@ -102,6 +108,17 @@ class BreakWatch:
             or stalled.any()
             or (n > 0 and self.pins_over >= n - math.floor(0.99 * (n - 1)))
         )
+
+
+def invalid_reason(walk: Walk, model: str) -> str:
+    """Returns why a walk is invalid ("" when it is not): its feet strayed past
+    `INVALID_DEVIATION_MM` from their linkage's path."""
+    if not walk.foot_deviation_mm > INVALID_DEVIATION_MM:
+        return ""
+    return (
+        f"invalid: the {model} model came apart, its feet strayed {walk.foot_deviation_mm:.0f} mm "
+        f"from their linkage's path (more than {INVALID_DEVIATION_MM:g} mm); not a walk"
+    )
 
 
 def break_reason(walk: Walk, lag_deg: np.ndarray) -> str:

@@ -8,13 +8,23 @@ import math
 import statistics
 from typing import TYPE_CHECKING
 
+from linkevo.sim.robot.frailty import RANK
 from linkevo.sim.robot.hexapod import Floor
 
 if TYPE_CHECKING:
     from linkevo.sim.robot.walking import Walk
 
-FOOT_DEVIATION_MM = 1.0
-"""A foot further than this from where its linkage puts it is flagged (`caveats`)."""
+FOOT_DEVIATION_MM = 2.0
+"""A foot further than this from where its linkage puts it is flagged (`caveats`): beyond
+the loop closure a walk holds (`sim.robot.walking.LOOP_ERROR_BOUND_MM`); past
+`sim.robot.breaks.INVALID_DEVIATION_MM` the walk is invalid."""
+CHAOTIC_CM = 10.0
+"""Repeats from hand-placed starts (heading ±3°, position ±5 mm, phases ±3°) whose
+distances spread over more than this, and over more than `CHAOTIC_SHARE` of their mean
+distance, walk a chaotic gait (`chaotic`): the robot's path hangs on how it was set down,
+and one walk's distance says little of the next's. Sound walks of one leg agree within a
+centimetre or two (docs/walking.md)."""
+CHAOTIC_SHARE = 0.25
 PITCH_CAVEAT_DEG = 20.0
 """A frame pitching further than this is flagged: the robot rocks, and how far it gets
 depends on contacts the simulation models least well (`caveats`)."""
@@ -68,6 +78,8 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "timestep_ms": [round(w.timestep * 1000, 3) for w in walks],
         "frame_contact_share": rounded(worst(w.frame_contact for w in walks), 3),
         "frailty": frailest(walks),
+        "invalid": any(w.invalid for w in walks),
+        "chaotic": chaotic(walks),
         "caveats": caveats(walks),
     }
 
@@ -78,14 +90,32 @@ def frailest(walks: list[Walk]) -> dict | None:
     found = [w.frailty for w in walks if w.frailty is not None]
     if not found:
         return None
-    return max(found, key=lambda f: (f.foot_deflection_mm, f.pin_moment_nmm)).as_dict()
+    return max(found, key=lambda f: (RANK[f.verdict], f.nominal.give_mm)).as_dict()
+
+
+def chaotic(walks: list[Walk]) -> bool:
+    """Whether repeats of one robot from perturbed starts disagree widely: their distances
+    spread over more than `CHAOTIC_CM` and `CHAOTIC_SHARE` of their mean's size."""
+    distances = [w.distance_m * 100 for w in walks if math.isfinite(w.distance_m)]
+    if len(distances) < 2:
+        return False
+    spread = max(distances) - min(distances)
+    return spread > CHAOTIC_CM and spread > CHAOTIC_SHARE * abs(statistics.fmean(distances))
 
 
 def caveats(walks: list[Walk]) -> list[str]:
     """Returns what a builder should know before trusting these walks' distances (empty
-    when nothing): a walk beyond the level-body no-slip bound, a frame that pitches past
-    `PITCH_CAVEAT_DEG`, feet that stray past `FOOT_DEVIATION_MM` from their linkage's path."""
+    when nothing): repeats that disagree widely (`chaotic`), a walk beyond the level-body
+    no-slip bound, a frame that pitches past `PITCH_CAVEAT_DEG`, feet that stray past
+    `FOOT_DEVIATION_MM` from their linkage's path."""
     out = []
+    if chaotic(walks):
+        distances = [w.distance_m * 100 for w in walks if math.isfinite(w.distance_m)]
+        out.append(
+            f"a chaotic gait: the repeats walk {min(distances):.0f} to {max(distances):.0f} cm "
+            "from starts a few millimetres and degrees apart; one walk's distance says little "
+            "of the next's"
+        )
     beyond = [w for w in walks if math.isfinite(w.distance_m) and w.distance_m > w.bound_m]
     if beyond:
         out.append(

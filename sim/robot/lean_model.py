@@ -12,6 +12,13 @@ so their mass rides with the frame, and the pins' forces come from the statics o
 massless mechanism (`LegStatics`): the equalities' forces are exactly what the pins exert
 on the parts that meet the floor.
 
+The crank's own rigid part (the crank, its extensions and the trusses on it) is such a
+coupled body too when it reaches the floor, never beams on the crank's hinge body: MuJoCo
+turns a hinge's body by `qpos - qpos0`, and re-centring the couplings moves the crank's
+`qpos0` with its angle, so a body on that hinge stays where the crank was at the last
+re-centring (a leg whose foot rides on the crank, a "rimless wheel", walked with its feet
+still while its couplings held; docs/walking.md, "Where the lean model breaks down").
+
 The coupled parts get an armature (`CONTACT_INERTIA_KG`): MuJoCo's soft contacts scale with
 the inertia behind the contact, and without it a few grams of beam sink into a soft floor
 far deeper than the crank-driven mechanism would let them (docs/walking.md compares the two
@@ -285,9 +292,7 @@ def build_lean_robot(
             pivot = int(leg.beams[members[0], 0])
             if part == -1:
                 target, origin = body, np.zeros(3)
-            elif part == 0:
-                target, origin = crank, axle
-            else:
+            else:  # the crank's own part too: its hinge's body turns by qpos - qpos0
                 origin = world(nodes[pivot], int(leg.layer[members[0]]))
                 target = body.add_body(name=f"{slot}/part{part}", pos=origin.tolist())
                 rows += _couple(spec, target, slot, i, leg, part, pivot, pose)
@@ -306,7 +311,7 @@ def build_lean_robot(
     model = spec.compile()
     names = [r.name for r in rows]
     statics = {  # one per distinct leg: slots with the same leg share its statics
-        id(legs[s]): LegStatics.of(legs[s], [p for p in coupled[s] if p > 0]) for s in LEG_SLOTS
+        id(legs[s]): LegStatics.of(legs[s], [p for p in coupled[s] if p >= 0]) for s in LEG_SLOTS
     }
     cranks = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, f"{s}/crank") for s in LEG_SLOTS]
     coupling = Coupling(

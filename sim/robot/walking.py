@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from linkevo.sim.robot.breaks import BreakWatch, break_reason
+from linkevo.sim.robot.breaks import BreakWatch, break_reason, invalid_reason
 from linkevo.sim.robot.frailty import Frailty, judge_frailty
 from linkevo.sim.robot.full_model import TIMESTEP_S, build_robot
 from linkevo.sim.robot.gait import GaitConfig, PhasePid
@@ -119,6 +119,8 @@ class Walk:
             its crank's angle (`RobotModel.foot_deviation`): the pins' play along the leg.
         stopped_s: where a walk with `stop_at_break` ended because it had broken (seconds
             after the clock started), NaN when it ran its length.
+        invalid: the model came apart (`sim.robot.breaks.invalid_reason`): the walk breaks
+            with that reason and its distance is NaN, never a walk's.
         frailty: how far the real LEGO leg would give under the walk's loads
             (`sim.robot.frailty`; the frailest of the walked legs); a frail leg breaks the walk.
         trace: per control tick: "t" (T,), "body" (T, 3) frame position, "contact"
@@ -151,6 +153,7 @@ class Walk:
     foot_deviation_mm: float = math.nan
     stopped_s: float = math.nan
     frailty: Frailty | None = None
+    invalid: bool = False
 
 
 def walk(
@@ -375,6 +378,11 @@ class _Run:
             timestep=self.settings.step,
             foot_deviation_mm=float(deviation.max() * 1000),
         )
+        invalid = invalid_reason(walk, self.settings.model)
+        if invalid:
+            return dataclasses.replace(
+                walk, distance_m=math.nan, breaks=True, reason=invalid, invalid=True
+            )
         reason = break_reason(walk, lag)
         planned = round(self.settings.seconds * self.gait.rate_hz)
         if len(t) < planned and reason:

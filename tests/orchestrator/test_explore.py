@@ -139,7 +139,7 @@ def test_explore_refuses_bad_input_before_writing(store, tmp_path, capsys):
         assert main(["explore", *extra, "--tracking-uri", uri, "--out", str(out)]) == 2
         assert message in capsys.readouterr().err
     assert main(["explore", runs["MAP-ST"], "--tracking-uri", uri, "--out", str(tmp_path)]) == 2
-    assert "give a file name ending in .html" in capsys.readouterr().err
+    assert "allowed a .html file" in capsys.readouterr().err
     assert not out.exists()
 
 

@@ -480,7 +480,7 @@ def test_a_walk_map_keeps_its_robot_and_refuses_to_resume_on_another(
     uri, runs = store
     run_id = runs["MAP-LIS"]
     tags = MlflowClient(uri).get_run(run_id).data.tags
-    assert tags["walk_map_physics"] == "{}"  # walked on the study's robot
+    assert tags["walk_map_robot"] == "{}"  # walked on the study's robot
     heavy = tmp_path / "heavy.toml"
     shipped = (Path(__file__).parents[2] / "configs" / "hexapod.toml").read_text()
     heavy.write_text(shipped.replace("frame_mass_kg = 1.1", "frame_mass_kg = 2.5"))
@@ -498,6 +498,7 @@ def test_a_walk_map_keeps_its_robot_and_refuses_to_resume_on_another(
     ]
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert 'its walk map walked a robot with physics {}, this one has {"frame_mass_kg": 2.5}' in err
-    assert "--restart to walk the map anew on this robot" in err
+    said = 'its walk map walked the robot {}, this one is {"physics": {"frame_mass_kg": 2.5}}'
+    assert said in err
+    assert "or --restart to walk the map anew" in err
     pd.testing.assert_frame_equal(_walk_map(uri, run_id, tmp_path / "after"), before)

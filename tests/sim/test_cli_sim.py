@@ -87,7 +87,11 @@ def test_eval_reads_a_user_target_file(linkevo, genome_file, tmp_path):
     [
         (np.full((2, 56), np.nan), [], "row 0, gene 0"),
         (np.full((2, 55), 0.5), [], "shape (N, 56)"),
-        (np.full((2, 56), 0.5), ["--target", "nowhere.json"], "neither a published target"),
+        (
+            np.full((2, 56), 0.5),
+            ["--target", "nowhere.json"],
+            "is not allowed: D16, D24 or an existing .json target file",
+        ),
         (np.zeros((0, 56)), [], "holds no genomes (shape (0, 56))"),
         (np.full((2, 56), 0.5), ["--angles", "1"], "--angles must be >= 3, got 1"),
         (np.full((2, 56), 0.5), ["--angles", "1000000000"], "--angles 1,000,000,000: 2 genome"),

@@ -1,7 +1,7 @@
-"""Frail legs (`sim.robot.frailty`) against beam theory on hand-made legs, and the break rule on
-the real engine: the study's benchmark leg (the MAP-LIS first robot, whose real
-counterpart's legs were "too large to support the weight of the robot frame") is frail;
-a short leg is not."""
+"""Frail legs (`sim.robot.frailty`) against beam theory on hand-made legs, each correction
+apart (the tripod's lone foot, the sag by the beam's angle, an extended crank held at the
+axle, the foot's layers, the splay's drop), the three-valued verdict over the parameters'
+ranges, and the break rule on the real engine."""
 
 from __future__ import annotations
 
@@ -14,11 +14,12 @@ import pytest
 
 from linkevo.sim.linkage.linkage_doc import from_document
 from linkevo.sim.robot.frailty import (
-    ABS_E_N_MM2,
-    FRAIL_FOOT_MM,
-    I_IN_MM4,
-    I_OUT_MM4,
-    PIN_PLAY_RAD,
+    BEST,
+    FRAIL,
+    NOMINAL,
+    SOUND,
+    UNCERTAIN,
+    WORST,
     cantilever_end_moment_mm,
     cantilever_tip_load_mm,
     foot_load_n,
@@ -29,84 +30,111 @@ from linkevo.sim.robot.leg import Leg, leg_from_genome
 from linkevo.sim.robot.walking import WalkSettings, walk
 
 ROOT = Path(__file__).parents[2]
+ANGLES = np.linspace(0, 2 * np.pi, 360, endpoint=False)
 
 
-def test_a_technic_beams_sections_are_the_hand_computed_ones():
-    # 7.2 mm square, a 4.8 mm hole: in plane t(h^3 - d^3)/12, out of plane (h - d) t^3/12
-    assert pytest.approx(7.2 * (373.248 - 110.592) / 12, rel=1e-12) == I_IN_MM4  # 157.6
-    assert pytest.approx(2.4 * 373.248 / 12, rel=1e-12) == I_OUT_MM4  # 74.65
-    # a 15-module beam (120 mm) with 10 N at its tip, in plane: 10 * 120^3 / (3 E I)
-    assert cantilever_tip_load_mm(10.0, 120.0, I_IN_MM4) == pytest.approx(
-        17_280_000 / (3 * 2300 * 157.5936), rel=1e-9
-    )  # 15.9 mm
-    # the same beam under a 100 N·mm end moment, out of plane: M L^2 / (2 E I)
-    assert cantilever_end_moment_mm(100.0, 120.0, I_OUT_MM4) == pytest.approx(
-        1_440_000 / (2 * 2300 * 74.6496), rel=1e-9
-    )
-
-
-def hand_leg(reach: float, extension: float, layers: tuple[int, int]) -> Leg:
+def hand_leg(drop: float, run: float, layers: tuple[int, ...], on_crank: bool = False) -> Leg:
     """A hand-made leg (modules): a crank of one module on layer `layers[0]` turning about
-    node 0, and a beam on layer `layers[1]` pinned to the crank's tip (node 1) running
-    `extension` modules straight down to the foot (node 2), `reach` from the axle at most."""
-    angles = np.linspace(0, 2 * np.pi, 360, endpoint=False)
-    crank = np.stack([np.cos(angles), np.sin(angles)], axis=1)
-    foot = crank + np.array([0.0, -extension])
-    paths = np.stack([np.zeros_like(crank), crank, foot])
-    assert np.linalg.norm(foot, axis=1).max() == pytest.approx(reach)
+    node 0, and a beam on layer `layers[1]` pinned to the crank's tip (node 1) reaching the
+    foot (node 2) `run` across and `drop` down; with `on_crank` that beam is the crank's own
+    extension (the crank's part). More layers put more beams at the foot (node 2), each a
+    spoke from a frame node (node 3) of its own part."""
+    crank = np.stack([np.cos(ANGLES), np.sin(ANGLES)], axis=1)
+    foot = crank + np.array([run, -drop])
+    frame_node = np.tile([run, -drop - 3.0], (len(ANGLES), 1))
+    paths = np.stack([np.zeros_like(crank), crank, foot, frame_node])
+    beams = [(0, 1), (1, 2), *[(3, 2)] * (len(layers) - 2)]
+    parts = [0, 0 if on_crank else 1, *range(2, len(layers))]
     return Leg(
         paths=paths,
-        beams=np.array([(0, 1), (1, 2)], dtype=np.int64),
-        part=np.array([0, 1], dtype=np.int64),
+        beams=np.array(beams, dtype=np.int64),
+        part=np.array(parts, dtype=np.int64),
         layer=np.array(layers, dtype=np.int64),
-        frame_nodes=np.array([0], dtype=np.int64),
+        frame_nodes=np.array([0, 3], dtype=np.int64),
         foot=2,
         built=True,
     )
 
 
-def test_the_foot_deflection_is_beam_theory_on_the_legs_own_build():
-    leg = hand_leg(reach=11.0, extension=10.0, layers=(0, 2))
-    found = frailty(leg, pin_force_p99_n=20.0)
-    frame = Frame()
-    beams_kg = 6 * BEAM_KG_PER_MODULE * (1.0 + 10.0)  # six legs of 11 modules of beam
-    load = (frame.mass_kg + beams_kg) * 9.81 / 3
-    assert found.foot_load_n == pytest.approx(load, rel=1e-9) == foot_load_n(frame, leg)
-    reach_mm, offset_mm = 88.0, 16.0  # 11 modules; the foot two layers out
-    splay = load * offset_mm * reach_mm**2 / (2 * ABS_E_N_MM2 * I_OUT_MM4) + PIN_PLAY_RAD * reach_mm
-    assert found.splay_mm == pytest.approx(splay, rel=1e-9)
-    # the foot hangs on its beam past the beam's one pin (node 1): a cantilever of 10
-    # modules (80 mm) loaded at its tip in the plane
-    assert found.sag_mm == pytest.approx(load * 80.0**3 / (3 * ABS_E_N_MM2 * I_IN_MM4), rel=1e-9)
-    assert found.foot_deflection_mm == pytest.approx(math.hypot(found.splay_mm, found.sag_mm))
-    assert found.pin_moment_nmm == pytest.approx(20.0 * 16.0)  # 20 N across two layers
-    # what beam theory says of the parts: the splay's bending goes with the offset and the
-    # square of the reach, the sag with the cube of the overhang
-    flat = frailty(hand_leg(reach=11.0, extension=10.0, layers=(0, 0)), 20.0)
-    assert flat.splay_mm == 0.0 and flat.pin_moment_nmm == 0.0
-    heavier = frailty(leg, 20.0, Frame(mass_kg=2 * frame.mass_kg + beams_kg))
-    assert heavier.sag_mm == pytest.approx(2 * found.sag_mm, rel=1e-9)
-
-
-def test_a_short_leg_is_sound_and_a_long_one_frail():
-    short = frailty(hand_leg(reach=5.0, extension=4.0, layers=(0, 1)), 10.0)
-    long = frailty(hand_leg(reach=26.0, extension=25.0, layers=(0, 3)), 10.0)
-    assert not short.frail and short.reason() == ""
-    assert long.frail and long.foot_deflection_mm > FRAIL_FOOT_MM
-    assert long.reason().startswith("frail: the foot gives")
-
-
-def test_the_walk_breaks_a_frail_leg_and_reports_its_figures():
-    benchmark = json.loads((ROOT / "benchmarks" / "walk_linkage.json").read_text())
-    frail_leg = leg_from_genome(*from_document(benchmark))
-    walked = walk(frail_leg, FLOORS["flat"], settings=WalkSettings(seconds=1.0))
-    assert walked.frailty is not None and walked.frailty.frail
-    assert walked.breaks and "frail: the foot gives" in walked.reason
-    assert walked.distance_m > 0.01  # it walks, rigid; the real leg would fold
-    sound = json.loads((ROOT / "tests" / "data" / "sound_leg.json").read_text())
-    walked = walk(
-        leg_from_genome(*from_document(sound)), FLOORS["flat"], settings=WalkSettings(seconds=1.0)
+def test_beam_theorys_cantilevers():
+    # a 15-module beam (120 mm) with 10 N at its tip: 10 * 120^3 / (3 E I)
+    assert cantilever_tip_load_mm(10.0, 120.0, 2300.0, 200.0) == pytest.approx(
+        17_280_000 / (3 * 2300 * 200.0), rel=1e-12
     )
+    # the same beam under a 100 N·mm end moment: M L^2 / (2 E I)
+    assert cantilever_end_moment_mm(100.0, 120.0, 2300.0, 124.0) == pytest.approx(
+        1_440_000 / (2 * 2300 * 124.0), rel=1e-12
+    )
+
+
+def test_the_lone_foot_of_a_tripod_carries_half_the_robot():
+    leg = hand_leg(drop=10.0, run=0.0, layers=(0, 0))
+    frame = Frame()
+    beams_kg = 6 * BEAM_KG_PER_MODULE * (1.0 + 10.0)
+    assert foot_load_n(frame, leg) == pytest.approx((frame.mass_kg + beams_kg) * 9.81 / 2)
+
+
+def test_the_sag_goes_with_the_square_of_the_cosine_of_the_beams_angle():
+    w = foot_load_n(Frame(), hand_leg(drop=6.0, run=8.0, layers=(0, 0)))
+    slanted = frailty(hand_leg(drop=6.0, run=8.0, layers=(0, 0)), 0.0)
+    # the beam from the crank tip to the foot is 10 modules (80 mm) at cos = 0.8
+    expected = cantilever_tip_load_mm(w, 80.0, NOMINAL.e_n_mm2, NOMINAL.i_in_mm4) * 0.8**2
+    assert slanted.nominal.sag_mm == pytest.approx(expected, rel=1e-9)
+    vertical = frailty(hand_leg(drop=10.0, run=0.0, layers=(0, 0)), 0.0)
+    assert vertical.nominal.sag_mm == pytest.approx(0.0, abs=1e-9)  # along the beam: no sag
+
+
+def test_a_foot_on_the_cranks_own_part_hangs_from_the_axle():
+    on_crank = frailty(hand_leg(drop=6.0, run=8.0, layers=(0, 0), on_crank=True), 0.0)
+    pinned = frailty(hand_leg(drop=6.0, run=8.0, layers=(0, 0)), 0.0)
+    assert on_crank.nominal.sag_mm > pinned.nominal.sag_mm
+    g = on_crank.geometry  # the cantilever runs from the axle (node 0) to the foot
+    path = hand_leg(drop=6.0, run=8.0, layers=(0, 0)).paths[2]
+    stance = path[:, 1] <= (path[:, 1].min() + path[:, 1].max()) / 2
+    np.testing.assert_allclose(g.hang_mm, np.linalg.norm(path[stance], axis=1) * 8.0)
+
+
+def test_the_splay_is_the_foots_layers_offset_levering_the_reach_and_drops_the_foot():
+    leg = hand_leg(drop=10.0, run=0.0, layers=(0, 2, 4))  # the foot joins layers 2 and 4
+    found = frailty(leg, 0.0)
+    g = found.geometry
+    assert g.offset_mm == pytest.approx(3 * 8.0)  # the foot's layers' mean, 3, from 0
+    w, s = g.load_n, NOMINAL
+    splay = cantilever_end_moment_mm(w * 24.0, 1.0, s.e_n_mm2, s.i_out_mm4) * g.reach_mm**2
+    splay += g.crossings * math.radians(s.pin_play_deg) * g.reach_mm
+    drop = splay**2 / (2 * g.reach_mm)
+    worst = int(np.argmax(drop))
+    assert found.nominal.splay_mm == pytest.approx(splay[worst], rel=1e-9)
+    assert found.nominal.give_mm == pytest.approx(drop[worst], rel=1e-9)  # no sag: vertical
+
+
+def test_the_pin_moment_is_the_force_levered_across_the_widest_bridge():
+    leg = hand_leg(drop=10.0, run=0.0, layers=(0, 2))
+    found = frailty(leg, 20.0)
+    assert found.best.pin_moment_nmm == pytest.approx(20.0 * 16.0 * BEST.pin_lever)
+    assert found.worst.pin_moment_nmm == pytest.approx(20.0 * 16.0 * WORST.pin_lever)
+
+
+def test_the_verdict_is_three_valued_over_the_ranges():
+    short = frailty(hand_leg(drop=4.0, run=0.0, layers=(0, 1)), 5.0)
+    assert short.verdict == SOUND and not short.frail and short.reason() == ""
+    # a pin bridging two layers at 25 N: 200-400 N·mm against a yield of 350-430
+    straddling = frailty(hand_leg(drop=4.0, run=0.0, layers=(0, 2)), 25.0)
+    assert straddling.verdict == UNCERTAIN and not straddling.frail
+    assert straddling.as_dict()["limits_passed"]  # the worst end passes a limit
+    bent = frailty(hand_leg(drop=4.0, run=0.0, layers=(0, 2)), 60.0)  # 480-960 N·mm
+    assert bent.verdict == FRAIL and bent.reason().startswith("frail: a pin is bent")
+    long = frailty(hand_leg(drop=12.0, run=24.0, layers=(0, 0)), 0.0)  # a long slanted foot
+    assert long.verdict == FRAIL and "more than half its" in long.reason()
+
+
+def test_the_walk_reports_the_verdict_and_breaks_only_a_frail_leg():
+    sound = json.loads((ROOT / "tests" / "data" / "sound_leg.json").read_text())
+    leg = leg_from_genome(*from_document(sound))
+    walked = walk(leg, FLOORS["flat"], settings=WalkSettings(seconds=1.0))
     assert walked.frailty is not None and not walked.frailty.frail and not walked.breaks
-    expected = frailty(leg_from_genome(*from_document(sound)), walked.pin_force_n[2])
-    assert walked.frailty == expected
+    assert walked.frailty.as_dict() == frailty(leg, walked.pin_force_n[2]).as_dict()
+    frail_leg = hand_leg(drop=12.0, run=24.0, layers=(0, 0))
+    walked = walk(frail_leg, FLOORS["flat"], settings=WalkSettings(seconds=1.0))
+    assert walked.frailty is not None and walked.frailty.verdict == FRAIL
+    assert walked.breaks and "frail: the foot gives" in walked.reason

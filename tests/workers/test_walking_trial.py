@@ -186,9 +186,12 @@ def test_broken_walks_lose_to_every_sound_one(tmp_path):
 @pytest.mark.parametrize(
     ("make", "message"),
     [
-        (lambda: TrialSpec("MAP-LIS", "Fw", 1000, 32), "walks must be a positive integer"),
+        (
+            lambda: TrialSpec("MAP-LIS", "Fw", 1000, 32),
+            r"walks must be an integer in \[1, 10,000,000\]",
+        ),
         (lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, walks=5), "for fitness Fw only"),
-        (lambda: TrialSpec.walking("MAP-LIS", 0), "walks must be a positive integer"),
+        (lambda: TrialSpec.walking("MAP-LIS", 0), r"walks must be an integer in \[1, 10,000,000\]"),
         (lambda: TrialSpec.walking("EA", 10, walk_rerank=3), "walk_rerank is for the path"),
         (lambda: TrialSpec.walking("NSGA2", 10, surrogate=True), "surrogate = true is for"),
         (lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, surrogate=True), "surrogate = true is for"),

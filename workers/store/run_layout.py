@@ -123,6 +123,10 @@ WALK_MODEL_PNG = "walk_model.png"
 WALK_LOG = "walks.parquet"
 """A walking trial's walk log: a row per candidate it built (its stage, leg key, node,
 seconds and each floor's figures; `workers.walk_log.WalkLog`)."""
+BEST_CONFIRMED = "best_confirmed.json"
+"""A walking trial's best walker walked again on the full model from hand-placed starts
+(`sim.robot.confirmation`): each floor's lean and full distances, whether they agree, and
+whether the full model's repeats disagree widely."""
 WALK_RERANK = "walk_rerank.parquet"
 """A trial's re-ranking walks (grid key `walk_rerank`): its K best linkages walked."""
 BEST_WALKER = "best_walker.json"
