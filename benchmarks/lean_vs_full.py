@@ -41,6 +41,7 @@ APPROACHES = ("MAP-LIS", "NSGA2")
 def run_trials(tree: Path, work: Path, walks: int, trials: int) -> list[Path]:
     """Runs the trials on `tree`, two at a time; returns their folders."""
     jobs = [(a, s) for a in APPROACHES for s in range(1, trials + 1)]
+    env = tree_env(tree, work)
 
     def one(job: tuple[str, int]) -> Path:
         approach, seed = job
@@ -48,7 +49,7 @@ def run_trials(tree: Path, work: Path, walks: int, trials: int) -> list[Path]:
         words = f"trial --approach {approach} --fitness Fw --walks {walks} --seed {seed}"
         command = [sys.executable, "-m", "linkevo.orchestrator", *words.split()]
         command += ["--out", str(out), "--no-progress"]
-        subprocess.run(command, env=tree_env(tree, work), check=True, capture_output=True)
+        subprocess.run(command, env=env, check=True, capture_output=True)
         return out
 
     with ThreadPoolExecutor(2) as pool:

@@ -14,7 +14,7 @@ from linkevo.hardware.control_table import POSITION_UNITS_PER_TURN
 from linkevo.hardware.protocol import MAX_ID
 from linkevo.sim.errors import ConfigError
 from linkevo.sim.robot.gait import GaitConfig, limits, range_error
-from linkevo.sim.robot.hexapod import Physics, Robot
+from linkevo.sim.robot.hexapod import Physics, Robot, check_spacers
 
 T = TypeVar("T")
 
@@ -83,6 +83,7 @@ class RobotConfig:
     safety: SafetyConfig
     motors: tuple[MotorConfig, ...]
     physics: Physics = field(default_factory=Physics)
+    mounting: dict[str, int] | None = None
 
     @property
     def motor_ids(self) -> list[int]:
@@ -93,9 +94,9 @@ class RobotConfig:
         return next(m for m in self.motors if m.id == motor_id)
 
     def robot(self) -> Robot:
-        """Returns the robot a simulated walk walks, whole: its `[physics]`, its `[gait]` and
+        """Returns the robot a simulated walk walks, whole: its `[physics]`, its `[gait]`,
         each leg's phase offset from its motor's `name` (the slot, `sim.robot.hexapod.LEG_SLOTS`)
-        and `phase_deg` (the one loader of every command that walks).
+        and `phase_deg`, and its `[mounting]` (the one loader of every command that walks).
 
         Raises:
             ConfigError: the motors are not the six slots, named once each.
@@ -104,7 +105,7 @@ class RobotConfig:
         try:
             if len(phases) != len(self.motors):
                 raise ValueError(f"two motors share a name among {[m.name for m in self.motors]}")
-            return Robot(self.physics, self.gait, phases)
+            return Robot(self.physics, self.gait, phases, self.mounting)
         except ValueError as exc:
             raise ConfigError(f"robot config: {exc}") from None
 
@@ -161,7 +162,7 @@ def parse_config(raw: dict, source: str = "config") -> RobotConfig:
     Raises:
         ConfigError: naming the bad key or value and what is allowed.
     """
-    allowed = {*_SECTIONS, "motors"}
+    allowed = {*_SECTIONS, "motors", "mounting"}
     unknown = sorted(set(raw) - allowed)
     if unknown:
         raise ConfigError(f"{source}: unknown section(s) {unknown}; allowed: {sorted(allowed)}")
@@ -185,7 +186,17 @@ def parse_config(raw: dict, source: str = "config") -> RobotConfig:
             f"{source}: [safety] min_voltage_v = {safety.min_voltage_v} must be below "
             f"max_voltage_v = {safety.max_voltage_v}"
         )
-    return RobotConfig(motors=motors, **sections)
+    mounting = raw.get("mounting")
+    if mounting is not None:
+        if not isinstance(mounting, dict):
+            raise ConfigError(
+                f"{source}: [mounting] must be a table, got {type(mounting).__name__}"
+            )
+        try:
+            check_spacers(mounting)
+        except ValueError as exc:
+            raise ConfigError(f"{source}: {exc}") from None
+    return RobotConfig(motors=motors, mounting=mounting, **sections)
 
 
 def load_config(path: str | Path) -> RobotConfig:

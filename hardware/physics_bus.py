@@ -31,6 +31,7 @@ from linkevo.sim.robot.hexapod import LEG_SLOTS, Floor, Frame, Motor
 from linkevo.sim.robot.lean_model import build_lean_robot
 from linkevo.sim.robot.leg import Leg
 from linkevo.sim.robot.model import control_tick
+from linkevo.sim.robot.mounting import robot_spacers
 
 HOLDING_NM = 0.5
 """Torque the gearbox of a motor with torque off holds before it back-drives (estimate)."""
@@ -70,7 +71,12 @@ class PhysicsWorld:
         phases = {m.name: m.phase_rad for m in config.motors}  # set down aligned
         floor, frame = config.physics.floor(floor.name), frame or config.physics.frame()
         self.robot = build_lean_robot(
-            dict.fromkeys(LEG_SLOTS, leg), phases, floor, frame=frame, motor=self.motor
+            dict.fromkeys(LEG_SLOTS, leg),
+            phases,
+            floor,
+            frame=frame,
+            motor=self.motor,
+            spacers=robot_spacers(leg, config.robot()),  # mounted as a simulated walk is
         )
         self.model, self.data = self.robot.model, mujoco.MjData(self.robot.model)
         self.robot.loads.update(self.model, self.data)

@@ -13,7 +13,7 @@ from typing import Any
 
 from linkevo.sim.errors import ConfigError
 from linkevo.sim.robot.gait import GAIT_KEYS
-from linkevo.sim.robot.hexapod import PHYSICS_KEYS, Robot
+from linkevo.sim.robot.hexapod import LEG_SLOTS, PHYSICS_KEYS, Robot
 from linkevo.sim.study import (
     APPROACHES,
     DEFAULT_ANGLES,
@@ -120,6 +120,9 @@ class GridConfig:
         gait: the gait's settings that differ from the study's (`sim.robot.gait.GaitConfig`;
             a `[gait]` table, as the robot config's), for the same walks; empty (the
             default): the study's gait. The legs keep the study's tripods.
+        mounting: each slot's spacer layers between the frame and its leg (a `[mounting]`
+            table, as the robot config's: all six slots); empty (the default): chosen for
+            each linkage so that neighbouring legs cannot meet (`sim.robot.mounting`).
         evaluators_per_trial: evaluator actors per trial (K), >= 0; 0 (the default): the
             trial task evaluates its batches itself, with numba threads.
         cpus_per_evaluator: CPUs reserved by each evaluator actor, > 0.
@@ -155,6 +158,7 @@ class GridConfig:
     surrogate: bool = False
     physics: dict[str, float] = field(default_factory=dict)
     gait: dict[str, float] = field(default_factory=dict)
+    mounting: dict[str, int] = field(default_factory=dict)
     evaluators_per_trial: int = 0
     cpus_per_evaluator: float = 1.0
     trial_cpus: float | str = "auto"
@@ -181,8 +185,8 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank`, `seed_from`, `surrogate`, `physics` and `gait` count only when they
-        are on, and `walks`
+        `walk_rerank`, `seed_from`, `surrogate`, `physics`, `gait` and `mounting` count
+        only when they are on, and `walks`
         and `walk_batch` only for a grid with walking trials, so grids without them keep
         their ids. `trials` does not
         count: a trial's seed depends on its index, not on how many the grid holds, so a
@@ -196,7 +200,7 @@ class GridConfig:
             del out["seed_from"]
         if not out["surrogate"]:
             del out["surrogate"]
-        for key in ("physics", "gait"):
+        for key in ("physics", "gait", "mounting"):
             if not out[key]:
                 del out[key]
         return out
@@ -320,7 +324,7 @@ def _validate(cfg: GridConfig) -> None:
                 'allowed: with fitnesses = ["Fw"] and MAP-Elites approaches only '
                 f"(this grid has {', '.join(cfg.fitnesses)} and {', '.join(cfg.approaches)})",
             )
-    for key, names in (("physics", PHYSICS_KEYS), ("gait", GAIT_KEYS)):
+    for key, names in (("physics", PHYSICS_KEYS), ("gait", GAIT_KEYS), ("mounting", LEG_SLOTS)):
         table = getattr(cfg, key)
         if not isinstance(table, dict):
             raise _fail(key, table, f"allowed: a table of {', '.join(names)}")

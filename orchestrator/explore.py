@@ -39,7 +39,7 @@ from linkevo.sim.linkage.decoding import BEAM_KINDS, NODE_KINDS
 from linkevo.sim.linkage.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from linkevo.sim.robot.hexapod import in_floor_order
-from linkevo.sim.robot.walk_rows import Status
+from linkevo.sim.robot.walk_rows import SLIDING_SHARE, Status, beyond_bound_share, slide_share
 from linkevo.sim.study import FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
@@ -79,7 +79,8 @@ def repertoire_view(
         angle, (12, 2)), t (node kinds, (12,)), m (beams: start, end, kind, length, modules
         rounded on their own), f (foot path x and y, (2, A), None at failed angles), and
         with a walk map w: per floor of `floors`, [distance cm, breaks 0/1, reason, beyond
-        the level-body no-slip bound 0/1] or None where the cell was not walked on it;
+        the level-body no-slip bound 0/1, slides 0/1 (`sim.robot.walk_rows.SLIDING_SHARE`)]
+        or None where the cell was not walked on it;
         with predicted walks p: per floor, [predicted cm, spread cm, probability of
         breaking] or None. Positions are rounded
         to 0.1 module, lengths to 0.01, descriptors to 0.001, distances to 0.1 cm.
@@ -169,24 +170,20 @@ def repertoire_view(
 
 def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str], list]]:
     """Returns the floors of a walk map (flat first) and, per (cell, floor) walked, the
-    page's [distance cm, breaks 0/1, reason, beyond the level-body bound 0/1]."""
+    page's [distance cm, breaks 0/1, reason, beyond the level-body bound 0/1, slides 0/1]."""
     if walks is None or walks.empty:
         return [], {}
     walks = walks[walks["status"] == Status.WALKED]
     floors = in_floor_order(walks["floor"].unique())
-    bound = walks["bound_cm"].to_numpy(dtype=float)
-    beyond = np.isfinite(bound) & (walks["mean_distance_cm"].to_numpy(dtype=float) > bound)
     walked = {
-        (int(cell), str(floor)): [round(float(d), 1), int(bool(b)), str(r), int(x)]
-        for cell, floor, d, b, r, x in zip(
-            walks["cell"],
-            walks["floor"],
-            walks["mean_distance_cm"],
-            walks["breaks"],
-            walks["reason"],
-            beyond,
-            strict=True,
-        )
+        (int(r["cell"]), str(r["floor"])): [
+            round(float(r["mean_distance_cm"]), 1),
+            int(bool(r["breaks"])),
+            str(r["reason"]),
+            int(beyond_bound_share(r) > 0),
+            int(slide_share(r) > SLIDING_SHARE),
+        ]
+        for r in walks.to_dict("records")
     }
     return floors, walked
 

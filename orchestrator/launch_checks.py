@@ -86,6 +86,7 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
             options=dict(cfg.options.get(cell.approach, {})),
             physics=dict(cfg.physics),
             gait=dict(cfg.gait),
+            mounting=dict(cfg.mounting),
         )
         try:
             if cell.fitness == WALKING_FITNESS:

@@ -5,6 +5,8 @@ from __future__ import annotations
 import collections
 import csv
 import io
+import json
+import math
 import tempfile
 from pathlib import Path
 
@@ -14,7 +16,14 @@ import pandas as pd
 from linkevo.sim.linkage.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.linkage.physical import TOGGLE_DEG
 from linkevo.sim.robot.hexapod import in_floor_order
-from linkevo.sim.robot.walk_rows import FLOOR_FIELDS, FLOOR_ORDER, Status
+from linkevo.sim.robot.walk_rows import (
+    FLOOR_FIELDS,
+    FLOOR_ORDER,
+    SLIDING_SHARE,
+    Status,
+    beyond_bound_share,
+    slide_share,
+)
 from linkevo.sim.study import DEFAULT_ANGLES, STUDY_FITNESSES, WALKING_FITNESS
 from linkevo.workers.plots.build import draw_layers, draw_path_overlay, draw_template
 from linkevo.workers.plots.linkage import draw_linkage
@@ -94,8 +103,18 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
         lego_line(doc["lego"]),
         "",
         *(
+            [shape_line(doc["shape"]), "", mounting_line(doc["mounting"]), ""]
+            if "shape" in doc
+            else []
+        ),
+        *(
             [f"Simulated walk: {walk_line(doc['simulated_walk'])}.", ""]
             if doc.get("simulated_walk")
+            else []
+        ),
+        *(
+            [f"Confirmed walk: {confirmed_line(doc['confirmed_walk'])}.", ""]
+            if doc.get("confirmed_walk")
             else []
         ),
         *(
@@ -186,6 +205,47 @@ def lego_line(lego: dict) -> str:
     )
 
 
+def leg_facts(genome, mode: str) -> dict[str, dict]:
+    """Returns the leg's shape (`sim.robot.leg.Leg.shape`: size, stroke, lift, crank share)
+    and each slot's spacer layers on the study's robot with this leg in every slot
+    (`sim.robot.mounting.robot_spacers`), as "shape" and "mounting"; {} for a linkage that
+    does not turn."""
+    from linkevo.sim.robot.leg import LegError, leg_from_genome
+    from linkevo.sim.robot.mounting import robot_spacers
+
+    try:
+        leg = leg_from_genome(genome, mode)
+    except LegError:
+        return {}
+    return {"shape": leg.shape(), "mounting": robot_spacers(leg)}
+
+
+def shape_line(shape: dict) -> str:
+    """Returns the leg's shape (`leg_facts`) in a sentence."""
+    width, height = shape["size_cm"]
+    return (
+        f"Shape: the leg spans {width:.1f} x {height:.1f} cm over its turn; stroke "
+        f"{shape['stroke_cm']:.1f} cm, lift {shape['lift_cm']:.1f} cm; crank share "
+        f"{shape['crank_share']:.2f} (1: the foot rides the crank as a wheel's rim)."
+    )
+
+
+def mounting_line(spacers: dict[str, int]) -> str:
+    """Returns how the legs are mounted on the study's robot (`leg_facts`) in a sentence."""
+    from linkevo.sim.robot.mounting import spacers_text
+
+    if not any(spacers.values()):
+        return (
+            "Mounting: every leg straight on its motor's axle (neighbouring legs never meet on "
+            "the study's frame, axles 16 cm apart)."
+        )
+    return (
+        "Mounting: neighbouring legs meet on the study's frame (axles 16 cm apart), so some "
+        "sit further out on the motor's axle, on spacer layers (a Technic bush per 8 mm "
+        f"layer): {spacers_text(spacers)}."
+    )
+
+
 def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
     """Returns the LEGO build of a linkage as JSON-able values, or why there is none."""
     from linkevo.sim.robot.layers import layer_plan
@@ -235,16 +295,58 @@ def simulated_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
     rows = rows[rows["status"] == Status.WALKED]
     order = in_floor_order(rows["floor"])
     rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")
+    return {str(r["floor"]): walk_summary(r) for r in rows.to_dict("records")}
+
+
+def walk_summary(row: dict) -> dict:
+    """Returns a walk row as a pulled document keeps it: distance, breaks, reason, and how
+    far stepping explains the distance (`sim.robot.walk_rows.beyond_bound_share`,
+    `slide_share`; `slides` past `SLIDING_SHARE`)."""
+    beyond, slide = beyond_bound_share(row), slide_share(row)
     return {
-        str(r.floor): {
-            "distance_cm": round(float(r.mean_distance_cm), 1),
-            "seconds": float(getattr(r, "seconds", 10.0)),
-            "breaks": bool(r.breaks),
-            "reason": str(r.reason),
-            "beyond_bound": bool(float(r.mean_distance_cm) > float(r.bound_cm)),
-        }
-        for r in rows.itertuples()
+        "distance_cm": round(float(row["mean_distance_cm"]), 1),
+        "seconds": float(row.get("seconds", 10.0)),
+        "breaks": bool(row["breaks"]),
+        "reason": str(row["reason"]),
+        "beyond_bound": bool(beyond > 0),
+        "beyond_bound_share": None if math.isnan(beyond) else round(beyond, 3),
+        "slide_share": None if math.isnan(slide) else round(slide, 3),
+        "slides": bool(slide > SLIDING_SHARE),
     }
+
+
+def confirmed_walk(store: RunStore, source: SourceLinkage) -> dict:
+    """Returns a walking trial's best linkage as confirmed on the full model
+    (`best_confirmed.json`, `workers.trial_walks.confirm_best_walker`, without its genome);
+    {} for anything else, or where the trial confirmed no best."""
+    if not source.run_id or source.cell is not None or source.fitness != WALKING_FITNESS:
+        return {}
+    if layout.BEST_CONFIRMED not in store.artefact_names(source.run_id):
+        return {}
+    with tempfile.TemporaryDirectory() as tmp:
+        path = store.download(source.run_id, layout.BEST_CONFIRMED, Path(tmp))
+        confirmed = json.loads(path.read_text(encoding="utf-8"))
+    genome = confirmed.pop("genome", None)
+    if genome is None or not np.array_equal(genome, from_document(source.document)[0]):
+        return {}
+    return confirmed
+
+
+def confirmed_line(confirmed: dict) -> str:
+    """Returns the full model's confirmation (`confirmed_walk`) in one line."""
+    floors = "; ".join(
+        f"{floor} " + ("breaks" if f["full_breaks"] else f"{f['full_mean_cm']:.1f} cm")
+        for floor, f in confirmed["floors"].items()
+    )
+    flags = [
+        "the two models agree" if confirmed["agrees"] else "it DISAGREES with the lean model",
+        *(["a chaotic gait (its repeats disagree widely)"] if confirmed["chaotic"] else []),
+        *(["SLIDES: most of its distance is its feet sliding"] if confirmed["slides"] else []),
+    ]
+    return (
+        f"{floors} per 10 s on the full model ({confirmed['repeats']} hand-placed starts per "
+        f"floor); {'; '.join(flags)}"
+    )
 
 
 def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataFrame:
@@ -259,7 +361,9 @@ def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataF
     rows = []
     for i in match[-1:]:
         for floor in FLOOR_ORDER:
-            rows.append({"floor": floor, **{c: log[f"{floor}_{c}"].iloc[i] for c in FLOOR_FIELDS}})
+            names = {c: f"{floor}_{c}" for c in FLOOR_FIELDS}  # an older log lacks later ones
+            figures = {c: log[n].iloc[i] if n in log else math.nan for c, n in names.items()}
+            rows.append({"floor": floor, **figures})
     return pd.DataFrame(rows, columns=["floor", *FLOOR_FIELDS])
 
 
@@ -308,6 +412,12 @@ def walk_line(walks: dict[str, dict]) -> str:
         "; ".join(
             f"{floor} {w['distance_cm']:.1f} cm in {w['seconds']:g} s"
             + (" (beyond the level-body bound: trust it less)" if w.get("beyond_bound") else "")
+            + (
+                " (SLIDES: its feet slip at over half the body's speed; most of the distance "
+                "is sliding, not stepping)"
+                if w.get("slides")
+                else ""
+            )
             + (f", breaks ({w['reason']})" if w["breaks"] else "")
             for floor, w in walks.items()
         )
@@ -322,11 +432,13 @@ def pull(
     gif: bool = False,
     walks: dict[str, dict] | None = None,
     predicted: dict[str, dict] | None = None,
+    confirmed: dict | None = None,
 ) -> list[Path]:
     """Writes linkage.json, linkage.png, build_sheet.md and .csv, linkage.gif (with `gif`)
     and, when a LEGO build exists, path_overlay.png, layers.png (the exploded layer view)
-    and template.pdf (1:1 on A4 pages) into out. `walks` (`simulated_walks`) and
-    `predicted` (`predicted_walks`) go into the document and the sheet."""
+    and template.pdf (1:1 on A4 pages) into out. `walks` (`simulated_walks`), `predicted`
+    (`predicted_walks`) and `confirmed` (`confirmed_walk`) go into the document and the
+    sheet."""
     out.mkdir(parents=True, exist_ok=True)
     genome, mode = from_document(source.document)
     n_angles = int(source.document.get("n_angles", DEFAULT_ANGLES))
@@ -342,10 +454,13 @@ def pull(
     # crank angles, physical checks).
     doc = to_document(genome, mode, n_angles=n_angles, meta=meta)
     doc["lego"] = lego_build(genome, mode, source.fitness, n_angles)
+    doc |= leg_facts(genome, mode)
     if walks:
         doc["simulated_walk"] = walks
     if predicted:
         doc["predicted_walk"] = predicted
+    if confirmed:
+        doc["confirmed_walk"] = confirmed
     rows = build_sheet(doc, doc["lego"].get("lengths"), doc["lego"].get("layers"))
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=SHEET_COLUMNS, lineterminator="\n")

@@ -26,10 +26,18 @@ import pandas as pd
 from linkevo.sim import decode, simulate
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.physical import physical_checks
-from linkevo.sim.robot.hexapod import Robot
+from linkevo.sim.robot.hexapod import Robot, in_floor_order
 from linkevo.sim.robot.walk_map import CellBatch
 from linkevo.sim.robot.walk_map import walk_rows as _walk_rows
-from linkevo.sim.robot.walk_rows import COLUMNS, Status, walk_map_frame
+from linkevo.sim.robot.walk_rows import (
+    COLUMNS,
+    SLIDING_SHARE,
+    Status,
+    beyond_bound_share,
+    credited_cm,
+    slide_share,
+    walk_map_frame,
+)
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_parquet_atomic
 from linkevo.workers.store.runs import RunStore, TrialRun
@@ -350,3 +358,57 @@ def _log(
             store.log_metric(trial.run_id, f"walk_best_cm_{floor}", best)
         store.log_metric(trial.run_id, f"walk_cells_{floor}", float(len(part)))
     return frame
+
+
+TOP_WALKERS = 3
+"""The walk map's top cells a user is shown (`top_walkers`)."""
+
+
+def top_walkers(
+    frame: pd.DataFrame, repertoire: pd.DataFrame, mode: str, count: int = TOP_WALKERS
+) -> list[dict]:
+    """Returns the walk map's `count` best walkers with what a builder should doubt: the
+    cells walked soundly on every floor of the map, by their worst floor's credited distance
+    (`sim.robot.walk_rows.credited_cm`), each with its credited cm per floor, the largest
+    share its walks go beyond the level-body bound and the largest share its feet slide at
+    (`beyond_bound_share`, `slide_share`), whether it slides, and its leg's shape
+    (`sim.robot.leg.Leg.shape`).
+
+    Args:
+        frame: the walk map (`WalkMapResult.frame`); repertoire: the trial's repertoire
+            (its genomes by cell); mode: the trial's genome mode.
+    """
+    from linkevo.sim.robot.leg import LegError, leg_from_genome
+
+    walked = frame[frame["status"] == Status.WALKED]
+    floors = walked["floor"].unique()
+    order = in_floor_order(floors)
+    rows: dict[int, list[dict]] = {}
+    for row in walked.to_dict("records"):
+        rows.setdefault(int(row["cell"]), []).append(row)
+    sound = {
+        c: r for c, r in rows.items() if len(r) == len(floors) and not any(x["breaks"] for x in r)
+    }
+    ranked = sorted(sound, key=lambda c: (-min(credited_cm(r) for r in sound[c]), c))
+    genomes = dict(zip(repertoire["cell"].astype(int), repertoire["genome"], strict=True))
+    out = []
+    for cell in ranked[:count]:
+        try:
+            shape = leg_from_genome(np.asarray(genomes[cell], float), mode).shape()
+        except (KeyError, LegError):
+            shape = {}
+        slides = [slide_share(r) for r in sound[cell]]
+        out.append(
+            {
+                "cell": cell,
+                "credited_cm": {
+                    r["floor"]: round(credited_cm(r), 1)
+                    for r in sorted(sound[cell], key=lambda r: order.index(r["floor"]))
+                },
+                "beyond_bound_share": max(beyond_bound_share(r) for r in sound[cell]),
+                "slide_share": max(slides, key=lambda v: -1 if np.isnan(v) else v),
+                "slides": any(v > SLIDING_SHARE for v in slides),
+                "shape": shape,
+            }
+        )
+    return out

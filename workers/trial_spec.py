@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.errors import LinkevoError
-from linkevo.sim.robot.hexapod import Robot
+from linkevo.sim.robot.hexapod import ROBOT_PARTS, Robot
 from linkevo.sim.study import (
     APPROACHES,
     CANDIDATES_PER_WALK,
@@ -78,6 +78,8 @@ class TrialSpec:
         gait: the gait's settings that differ from the study's (`sim.robot.gait.GaitConfig`).
         phases: each leg slot's phase offset (degrees) where it differs from the study's
             tripods (a robot config's motors, `sim.robot.hexapod.Robot`).
+        mounting: each slot's spacer layers (a robot config's `[mounting]`, all six); empty:
+            chosen for each linkage (`sim.robot.mounting.auto_spacers`).
 
     Raises:
         TrialSpecError: on construction, for any value outside the allowed ones.
@@ -101,6 +103,7 @@ class TrialSpec:
     physics: dict = field(default_factory=dict)
     gait: dict = field(default_factory=dict)
     phases: dict = field(default_factory=dict)
+    mounting: dict = field(default_factory=dict)
 
     @classmethod
     def walking(cls, approach: str, walks: int, **settings: object) -> TrialSpec:
@@ -164,7 +167,7 @@ class TrialSpec:
                     f"surrogate = true with walks = {self.walks}: the walk model is first fitted "
                     f"after {START} walks, so it would screen none; allowed: walks > {START}"
                 )
-        for part in ("physics", "gait", "phases"):
+        for part in ROBOT_PARTS:
             if not isinstance(getattr(self, part), dict):
                 fail(f"{part} must be a table of numbers, got {getattr(self, part)!r}")
         try:
@@ -189,8 +192,9 @@ class TrialSpec:
             fail(str(exc))
 
     def robot(self) -> Robot:
-        """Returns the robot the trial's walks walk (`physics`, `gait` and `phases`)."""
-        return Robot.of({"physics": self.physics, "gait": self.gait, "phases": self.phases})
+        """Returns the robot the trial's walks walk (`physics`, `gait`, `phases` and
+        `mounting`)."""
+        return Robot.of({part: getattr(self, part) for part in ROBOT_PARTS})
 
     @property
     def walking_trial(self) -> bool:

@@ -87,10 +87,11 @@ def confirm_best_walker(
     spec: TrialSpec, log: WalkLog, genome: np.ndarray, loss: float, out_dir: Path
 ) -> dict[str, float]:
     """Walks a walking trial's best linkage again on the full model from hand-placed starts
-    (`sim.robot.confirmation`), writes `best_confirmed.json` and returns its metrics: each
-    floor's full-model mean credited distance (`best_full_<floor>_cm`), whether the two
-    models agree (`best_models_agree`, 1 or 0) and whether the full model's repeats disagree
-    widely (`best_chaotic`). A best that does not walk soundly on both floors (its loss in
+    (`sim.robot.confirmation`), writes `best_confirmed.json` and returns its metrics: each floor's
+    full-model mean credited distance (`best_full_<floor>_cm`), whether the two models agree
+    (`best_models_agree`, 1 or 0), whether the full model's repeats disagree widely (`best_chaotic`)
+    or owe most of their distance to sliding (`best_slides`), and the leg's width, stroke and crank
+    share (`sim.robot.leg.Leg.shape`). A best that does not walk soundly on both floors (its loss in
     the broken tiers) has nothing to confirm: {}."""
     from linkevo.sim.robot.confirmation import confirm_walk  # MuJoCo: only when asked
     from linkevo.sim.robot.leg import leg_from_genome
@@ -110,4 +111,8 @@ def confirm_best_walker(
     return metrics | {
         "best_models_agree": float(confirmed.agrees),
         "best_chaotic": float(confirmed.chaotic),
+        "best_slides": float(confirmed.slides),
+        "best_leg_width_cm": confirmed.shape["size_cm"][0],
+        "best_stroke_cm": confirmed.shape["stroke_cm"],
+        "best_crank_share": confirmed.shape["crank_share"],
     }

@@ -18,6 +18,7 @@ from linkevo.sim.robot.walk_rows import (
     COLUMNS,
     FLOOR_FIELDS,
     FLOOR_ORDER,
+    LATER_COLUMNS,
     LEGO_BUILD,
     WALK_ORDER,
     Stage,
@@ -153,9 +154,15 @@ class WalkLog:
     @classmethod
     def from_state(cls, state: Mapping[str, np.ndarray]) -> WalkLog:
         """Returns the log `state_dict` saved (KeyError, ValueError when it is not one)."""
-        floors = {
-            f: {k: np.asarray(state[f"walks.{f}.{k}"]) for k in FLOOR_FIELDS} for f in WALK_ORDER
-        }
+        rows = len(np.asarray(state["walks.stage"]))
+
+        def column(floor: str, name: str) -> np.ndarray:
+            key = f"walks.{floor}.{name}"
+            if key not in state and name in LATER_COLUMNS:
+                return np.full(rows, np.nan)
+            return np.asarray(state[key])
+
+        floors = {f: {k: column(f, k) for k in FLOOR_FIELDS} for f in WALK_ORDER}
         counts = np.asarray(state["walks.counts"], np.int64)
         counts = np.pad(counts, (0, len(LOG_COUNTERS) - len(counts)))  # a log before a count
         log = cls(
@@ -217,5 +224,6 @@ def _floor_columns(rows: list[dict]) -> dict[str, np.ndarray]:
         "bound_cm": np.array([r["bound_cm"] for r in rows], np.float64),
         "torque_p95_of_stall": np.array([r["torque_p95_of_stall"] for r in rows], np.float64),
         "pin_force_p99_n": np.array([r["pin_force_p99_n"] for r in rows], np.float64),
+        "foot_slip_mm_s": np.array([r["foot_slip_mm_s"] for r in rows], np.float64),
         "seconds": np.array([r["seconds"] for r in rows], np.float64),
     }

@@ -177,6 +177,10 @@ def _simulation_text(source, robot: str, result: dict) -> str:
             f"{result['pin_force_p99_n']} N; loop closure within {result['loop_error_max_mm']} "
             f"mm, feet within {result['foot_deviation_max_mm']} mm of their path"
         )
+    if result.get("spacers"):
+        from linkevo.sim.robot.mounting import spacers_text
+
+        lines.append(f"  mounted on spacer layers: {spacers_text(result['spacers'])}")
     frail = result.get("frailty")
     if frail:
         low, mid, high = frail["give_mm"]
@@ -184,8 +188,14 @@ def _simulation_text(source, robot: str, result: dict) -> str:
             f"  frailty: {frail['verdict']}; the foot gives {mid} mm ({low}-{high} over the "
             f"ranges of E, section and pin play) under the robot's weight, against a lift of "
             f"{frail['lift_mm']} mm; beams stressed to {frail['stress_mpa'][1]} MPa; pins "
-            f"bent out of the plane by {frail['pin_moment_nmm'][1]} N·mm"
+            f"bent out of the plane by {frail['pin_moment_nmm'][1]} N·mm; the motor's axle "
+            f"by {frail['axle_moment_nmm'][1]} N·mm ({frail['axle_mm']} mm out)"
         )
+        if frail["verdict"] != "sound":
+            lines.append(
+                f"    {frail['verdict']}: at the ends of the ranges least in its favour, "
+                + "; ".join(frail["limits_passed"])
+            )
     for caveat in result.get("caveats", []):
         lines.append(f"  caveat: {caveat}")
     verdict = f"BREAKS: {result['reason']}" if result["breaks"] else "walks"

@@ -153,6 +153,8 @@ def best_design(store: RunStore, trials: list) -> tuple[str, str, list[str]]:
 def handle(args: argparse.Namespace) -> int:
     """Handles `linkevo pull`."""
     from linkevo.orchestrator.pull import (
+        confirmed_line,
+        confirmed_walk,
         predicted_walks,
         prediction_line,
         pull,
@@ -193,11 +195,15 @@ def handle(args: argparse.Namespace) -> int:
     walks = simulated_walks(store, source)
     if walks:
         print(f"simulated walk: {walk_line(walks)}", file=sys.stderr)
+    confirmed = confirmed_walk(store, source)
+    if confirmed:
+        print(f"confirmed walk: {confirmed_line(confirmed)}", file=sys.stderr)
     predicted = predicted_walks(store, source)
     if predicted:
         print(f"predicted walk: {prediction_line(predicted)}", file=sys.stderr)
     out = args.out or Path("pulled")
-    for path in pull(source, out, gif=args.gif, walks=walks, predicted=predicted):
+    pulled = pull(source, out, gif=args.gif, walks=walks, predicted=predicted, confirmed=confirmed)
+    for path in pulled:
         print(path)
     return 0
 

@@ -161,9 +161,14 @@ def confirmation_line(metrics: dict[str, float]) -> str:
     full = ", ".join(f"{f} {metrics[f'best_full_{f}_cm']:.1f} cm" for f in FLOOR_ORDER)
     verdict = "agrees" if metrics["best_models_agree"] else "DISAGREES with the lean model"
     chaos = "; a chaotic gait (its repeats disagree widely)" if metrics["best_chaotic"] else ""
+    slides = (
+        "; SLIDES: its feet slip at over half the body's speed" if metrics["best_slides"] else ""
+    )
     return (
         f"best walker on the full model, 5 hand-placed starts per floor: {full} per 10 s; "
-        f"{verdict}{chaos} (best_confirmed.json)"
+        f"{verdict}{chaos}{slides}; a leg {metrics['best_leg_width_cm']:.0f} cm wide, stroke "
+        f"{metrics['best_stroke_cm']:.0f} cm, crank share {metrics['best_crank_share']:.2f} "
+        "(best_confirmed.json)"
     )
 
 
@@ -182,9 +187,10 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
     )
     if args.config is not None:
         from linkevo.orchestrator.commands.hexapod import load_robot
+        from linkevo.sim.robot.hexapod import ROBOT_PARTS
 
         robot = load_robot(args).robot().changed()
-        settings |= {part: robot.get(part, {}) for part in ("physics", "gait", "phases")}
+        settings |= {part: robot.get(part, {}) for part in ROBOT_PARTS}
     if args.batch_size is not None:
         settings["batch_size"] = args.batch_size
     try:

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
+from pathlib import Path
 
 from linkevo.orchestrator.cli import interrupted_code
 from linkevo.orchestrator.commands import options
@@ -67,6 +69,7 @@ def handle(args: argparse.Namespace) -> int:
         Selection,
         check_before_walking,
         run_on_ray,
+        top_walkers,
         walk_map,
     )
     from linkevo.workers.store.runs import RunStore
@@ -130,6 +133,10 @@ def handle(args: argparse.Namespace) -> int:
             if not result.walked:
                 print(f"{trial.trial_key} (run {trial.run_id}): the walk map is complete")
             print(summary(trial, result.frame))
+            with tempfile.TemporaryDirectory() as tmp:
+                repertoire = store.repertoire(trial.run_id, Path(tmp))
+            for line in walker_lines(top_walkers(result.frame, repertoire, trial.mode)):
+                print(line)
     finally:
         if started:
             ray.shutdown()
@@ -179,3 +186,23 @@ def summary(trial, frame) -> str:
             f"{furthest}"
         )
     return "\n".join(lines)
+
+
+def walker_lines(walkers: list[dict]) -> list[str]:
+    """The walk map's top walkers (`orchestrator.repertoire_walks.top_walkers`), a line
+    each, with what a builder should doubt."""
+    lines = ["  top walkers (by the worse floor, cm per 10 s credited):"] if walkers else []
+    for w in walkers:
+        floors = ", ".join(f"{f} {cm:.1f}" for f, cm in w["credited_cm"].items())
+        shape = w["shape"]
+        leg = (
+            f"; a leg {shape['size_cm'][0]:.0f} x {shape['size_cm'][1]:.0f} cm, stroke "
+            f"{shape['stroke_cm']:.0f} cm, crank share {shape['crank_share']:.2f}"
+            if shape
+            else ""
+        )
+        beyond = w["beyond_bound_share"]
+        doubt = f"; {beyond:.0%} beyond the level-body bound" if beyond > 0 else ""
+        doubt += "; SLIDES: its feet slip at over half the body's speed" if w["slides"] else ""
+        lines.append(f"    cell {w['cell']}: {floors}{leg}{doubt}")
+    return lines

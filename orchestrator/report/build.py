@@ -18,7 +18,11 @@ from matplotlib import rc_context
 
 from linkevo.orchestrator.config import ConfigError, from_dict, to_toml
 from linkevo.orchestrator.report import figures as fig
-from linkevo.orchestrator.report.checks import best_linkage_checks, checks_summary
+from linkevo.orchestrator.report.checks import (
+    best_linkage_checks,
+    checks_summary,
+    walking_winners,
+)
 from linkevo.orchestrator.report.findings import MEASURES, check_findings
 from linkevo.orchestrator.report.html import render_html
 from linkevo.orchestrator.report.load import GridData, load_grid
@@ -122,7 +126,8 @@ def build_report(
     Writes `<name>.png` and `<name>.pdf` per figure, `trials.csv`, `best_loss_summary.csv`,
     `pairwise_tests.csv`, `findings.csv`, `best_linkage_checks.csv` (the physical checks of
     each trial's best linkage), `path_sizes.csv` (each trial's best-ever foot path's
-    size, `measures.best_path_sizes`) and `report.html`, and logs them all under
+    size, `measures.best_path_sizes`), `walking_winners.csv` (a walking grid's best walkers,
+    `checks.walking_winners`) and `report.html`, and logs them all under
     `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
     With `first_trials` = N only trial indices 0..N-1 of each cell count (a grid grown by
     `--resume --set trials=...` answered at its first N trials); the report goes to
@@ -140,9 +145,12 @@ def build_report(
         budget = grid.config.get("evaluations")
         findings = tuple(check_findings(trials, sizes, tests, budget))
         checks = best_linkage_checks(grid)
+        winners = walking_winners(grid)
         made = report_figures(grid)
     with _staged(out) as staging:
         tables = {"best_linkage_checks.csv": checks, "path_sizes.csv": sizes}
+        if len(winners):
+            tables["walking_winners.csv"] = winners
         written = _write_report(
             grid, trials, tracking_uri, summary, tests, findings, tables, made, staging
         )
@@ -232,6 +240,7 @@ def _write_report(
         trials=trials,
         findings=findings,
         checks=checks_summary(read_tables["best_linkage_checks.csv"]),
+        winners=read_tables.get("walking_winners.csv"),
     )
     html_path = out / "report.html"
     write_bytes_atomic(html_path, page.encode("utf-8"))

@@ -1,5 +1,6 @@
 """Provides the physical checks (`sim.linkage.physical`) of a grid's best linkages, per trial and
-per approach and fitness: which of the study's answers a builder could build as simulated."""
+per approach and fitness: which of the study's answers a builder could build as simulated;
+and, for walking trials, what their best walkers are (`walking_winners`)."""
 
 from __future__ import annotations
 
@@ -8,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.report.load import GridData
+from linkevo.orchestrator.report.load import WALK_MEASURES, GridData
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage.linkage_doc import DocumentError, from_document
 from linkevo.sim.linkage.physical import physical_checks
-from linkevo.sim.study import DEFAULT_ANGLES
+from linkevo.sim.study import DEFAULT_ANGLES, WALKING_FITNESS
 from linkevo.workers.store.artifacts import read_document
 from linkevo.workers.store.runs import in_study_order
 
@@ -73,6 +74,15 @@ def _read(path: str) -> tuple[np.ndarray, str] | None:
         return from_document(read_document(Path(path)))
     except DocumentError:
         return None
+
+
+def walking_winners(grid: GridData) -> pd.DataFrame:
+    """Returns each finished walking trial's best walker (trial_key, approach, fitness and
+    the `WALK_MEASURES`), in the study's order; empty for a grid without walking trials."""
+    columns = ["trial_key", "approach", "fitness", *WALK_MEASURES]
+    trials = grid.finished()
+    trials = trials[trials.fitness == WALKING_FITNESS]
+    return in_study_order(trials.reindex(columns=columns)).reset_index(drop=True)
 
 
 def checks_summary(table: pd.DataFrame) -> pd.DataFrame:

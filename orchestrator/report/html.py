@@ -94,6 +94,7 @@ def render_html(
     trials: pd.DataFrame,
     findings: Sequence[Finding],
     checks: pd.DataFrame,
+    winners: pd.DataFrame | None = None,
 ) -> str:
     """Returns the report page; every image is inlined as a base64 PNG data URI.
 
@@ -109,6 +110,7 @@ def render_html(
         trials: per-trial table (trial_key, approach, fitness, status, error, best_loss).
         findings: `findings.check_findings`.
         checks: `checks.checks_summary` of the best linkages' physical checks.
+        winners: `checks.walking_winners` (None or empty: no walking trials).
     """
     unfinished = trials[trials.status != "FINISHED"]
     parts = [
@@ -161,6 +163,8 @@ def render_html(
         "larger side of the box the linkage sweeps, in modules.</p>"
     )
     parts.append(table_html(checks))
+    if winners is not None and len(winners):
+        parts.append(winners_html(winners))
     for title, caption, png in figures:
         data = base64.b64encode(png).decode("ascii")
         parts.append(
@@ -170,3 +174,32 @@ def render_html(
         )
     parts.append("</body></html>")
     return "\n".join(parts)
+
+
+def winners_html(winners: pd.DataFrame) -> str:
+    """Returns the section on a walking grid's best walkers (`checks.walking_winners`), with
+    the ones a builder should doubt named."""
+    doubt = []
+    for row in winners.itertuples():
+        why = [
+            text
+            for flag, text in (
+                (row.best_models_agree == 0, "the full model disagrees with the lean one"),
+                (row.best_chaotic == 1, "a chaotic gait"),
+                (row.best_slides == 1, "its distance is mostly its feet sliding"),
+            )
+            if flag
+        ]
+        if why:
+            doubt.append(f"<li>{html.escape(row.trial_key)}: {html.escape('; '.join(why))}</li>")
+    listed = f"<p>Doubt these:</p><ul>{''.join(doubt)}</ul>" if doubt else ""
+    return (
+        "<h2>Do the walking winners walk?</h2><p>Each walking trial's best walker, walked "
+        "again on the full model from five hand-placed starts per floor "
+        "(walking_winners.csv): its credited distance per 10 s on the lean model "
+        "(<i>best_flat_cm</i>, <i>best_carpet_cm</i>) and on the full one, whether the two "
+        "agree within 30 %, whether its repeats scatter (<i>chaotic</i>) or its feet slip at "
+        "over half the body's speed (<i>slides</i>), and its leg's width, stroke and crank "
+        "share (1: the foot rides the crank as a wheel's rim). NaN: the best did not walk "
+        f"soundly on both floors.</p>{listed}" + table_html(winners)
+    )

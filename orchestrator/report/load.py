@@ -32,6 +32,22 @@ FINAL_MEASURES: tuple[str, ...] = ("common_coverage", "common_qd_score", "path_d
 """Per-trial measures read as their last logged value: coverage and QD-score of every
 evaluated genome on the common MAP-LIS grid (`algorithms.common_grid`), and the diversity
 of the best paths (`sim.linkage.path_diversity`); NaN for a trial that did not log them."""
+WALK_MEASURES: tuple[str, ...] = (
+    "best_flat_cm",
+    "best_carpet_cm",
+    "best_full_flat_cm",
+    "best_full_carpet_cm",
+    "best_models_agree",
+    "best_chaotic",
+    "best_slides",
+    "best_leg_width_cm",
+    "best_stroke_cm",
+    "best_crank_share",
+)
+"""A walking trial's (fitness F_w) best walker as it ends: its credited distance per floor
+on the lean model, on the full model from hand-placed starts, whether the two agree, its
+repeats scatter or its feet slide, and its leg's shape (`workers.trial_walks`); NaN for
+other trials and for a best that does not walk soundly."""
 ARCHIVE_FILES: tuple[str, ...] = (layout.REPERTOIRE, layout.POPULATION)
 STATUS_MISSING = "MISSING"
 DOWNLOAD_THREADS = 8
@@ -51,8 +67,8 @@ class GridData:
             FAILED, KILLED, RUNNING or MISSING), error, best_loss (the best-ever loss, the
             last logged value), coverage and qd_score (last logged; the approach's own grid
             for MAP-Elites, the current population on the MAP-LIS grid for EA and NSGA-II,
-            RANDOM's samples on it), the `FINAL_MEASURES`, all NaN unless FINISHED with
-            metrics, final_evaluations, archive (local parquet path or
+            RANDOM's samples on it), the `FINAL_MEASURES` and `WALK_MEASURES`, all NaN
+            unless FINISHED with metrics, final_evaluations, archive (local parquet path or
             None), best_linkage (local path of the best-ever linkage document, or None).
         history: long table, one row per trial and iteration: trial_key, approach,
             fitness, status and the HISTORY_COLUMNS present in the runs (NaN where a run
@@ -212,13 +228,13 @@ def _trial_table(
             "best_loss": last("best_loss"),  # best-ever: the last value is the lowest
             "coverage": last("coverage"),
             "qd_score": last("qd_score"),
-            **{name: final(name) for name in FINAL_MEASURES},
+            **{name: final(name) for name in (*FINAL_MEASURES, *WALK_MEASURES)},
             "final_evaluations": evals,
             "archive": [str(a) if a is not None else None for a in archives],
             "best_linkage": [str(b) if b is not None else None for b in best_linkages],
         }
     )
-    measures = ["best_loss", "coverage", "qd_score", *FINAL_MEASURES]
+    measures = ["best_loss", "coverage", "qd_score", *FINAL_MEASURES, *WALK_MEASURES]
     table.loc[table.status != "FINISHED", measures] = np.nan
     return table
 
@@ -259,7 +275,7 @@ def _add_missing(trials: pd.DataFrame, config: dict) -> pd.DataFrame:
             "best_loss": float,
             "coverage": float,
             "qd_score": float,
-            **dict.fromkeys(FINAL_MEASURES, float),
+            **dict.fromkeys((*FINAL_MEASURES, *WALK_MEASURES), float),
             "final_evaluations": float,
             "trial_index": float,
         }

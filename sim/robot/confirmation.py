@@ -6,20 +6,31 @@ the failure first. So what a walking trial reports as its best walker is walked 
 full model (every beam a body, `sim.robot.full_model`) from `CONFIRM_REPEATS` hand-placed
 starts per floor, Table I's protocol, and the two are set side by side: the full model's
 credited distances (per 10 s, at most the level-body bound), whether it breaks, whether its
-repeats disagree widely (a chaotic gait, `sim.robot.field_summary.chaotic`), and whether the
-two models agree (`AGREEMENT`).
+repeats disagree widely (a chaotic gait, `sim.robot.field_summary.chaotic`), whether the
+two models agree (`AGREEMENT`), and what a builder should doubt in the winner: its shape
+(`sim.robot.leg.Leg.shape`: size, stroke, crank share) and how much of the full model's
+distance stepping cannot explain (beyond the bound, feet sliding:
+`sim.robot.walk_rows.SLIDING_SHARE`).
 """
 
 from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from linkevo.sim.robot.field_summary import chaotic
 from linkevo.sim.robot.hexapod import FLOORS, WALK_SECONDS, Robot
 from linkevo.sim.robot.leg import Leg
-from linkevo.sim.robot.walk_rows import FLOOR_ORDER
+from linkevo.sim.robot.walk_rows import (
+    FLOOR_ORDER,
+    LEGO_BUILD,
+    SLIDING_SHARE,
+    beyond_bound_share,
+    credited_cm,
+    slide_share,
+    walked_row,
+)
 from linkevo.sim.robot.walking import WalkSettings, field_trials
 
 CONFIRM_REPEATS = 5
@@ -43,6 +54,10 @@ class FloorCheck:
             a repeat has none).
         full_breaks: most of the full model's repeats break.
         chaotic: the full model's repeats disagree widely.
+        beyond_bound_share: how far the full model's repeats go beyond their level-body
+            bound (`sim.robot.walk_rows.beyond_bound_share`, their mean; NaN unknown).
+        slide_share: how fast their feet slip while down over the body's speed
+            (`sim.robot.walk_rows.slide_share`, their mean; NaN unknown).
     """
 
     floor: str
@@ -50,6 +65,13 @@ class FloorCheck:
     full_cm: tuple[float, ...]
     full_breaks: bool
     chaotic: bool
+    beyond_bound_share: float = math.nan
+    slide_share: float = math.nan
+
+    @property
+    def slides(self) -> bool:
+        """Whether most of the full model's distance comes from sliding."""
+        return self.slide_share > SLIDING_SHARE
 
     @property
     def full_mean_cm(self) -> float:
@@ -69,9 +91,11 @@ class FloorCheck:
 
 @dataclass(frozen=True)
 class Confirmation:
-    """A walk confirmed on the full model, floor by floor (`FLOOR_ORDER`)."""
+    """A walk confirmed on the full model, floor by floor (`FLOOR_ORDER`), with the leg's
+    shape (`sim.robot.leg.Leg.shape`)."""
 
     floors: tuple[FloorCheck, ...]
+    shape: dict = field(default_factory=dict)
 
     @property
     def agrees(self) -> bool:
@@ -83,11 +107,18 @@ class Confirmation:
         """The full model's repeats disagree widely on some floor."""
         return any(f.chaotic for f in self.floors)
 
+    @property
+    def slides(self) -> bool:
+        """Most of the full model's distance comes from sliding on some floor."""
+        return any(f.slides for f in self.floors)
+
     def as_dict(self) -> dict:
         """The confirmation as JSON-able values (`best_confirmed.json`)."""
         return {
             "agrees": self.agrees,
             "chaotic": self.chaotic,
+            "slides": self.slides,
+            "shape": self.shape,
             "repeats": len(self.floors[0].full_cm) if self.floors else 0,
             "floors": {
                 f.floor: {
@@ -99,6 +130,9 @@ class Confirmation:
                     "full_breaks": f.full_breaks,
                     "chaotic": f.chaotic,
                     "agrees": f.agrees,
+                    "beyond_bound_share": rounded(f.beyond_bound_share),
+                    "slide_share": rounded(f.slide_share),
+                    "slides": f.slides,
                 }
                 for f in self.floors
             },
@@ -131,19 +165,26 @@ def confirm_walk(
             settings=WalkSettings(seconds=seconds, model="full"),
             robot=robot,
         )
-        credited = tuple(
-            min(w.distance_m, w.bound_m) * 100 * WALK_SECONDS / seconds
-            if math.isfinite(w.distance_m) and not w.breaks
-            else math.nan
-            for w in walks
-        )
+        rows = [walked_row({"cell": -1, "seconds": seconds}, floor, w, LEGO_BUILD) for w in walks]
+        sound = [r for r in rows if not r["breaks"]]
         checks.append(
             FloorCheck(
                 floor=floor,
                 lean_cm=lean_cm.get(floor),
-                full_cm=credited,
+                full_cm=tuple(credited_cm(r) if not r["breaks"] else math.nan for r in rows),
                 full_breaks=2 * sum(w.breaks for w in walks) > len(walks),
                 chaotic=chaotic(walks),
+                beyond_bound_share=_mean([beyond_bound_share(r) for r in sound]),
+                slide_share=_mean([slide_share(r) for r in sound]),
             )
         )
-    return Confirmation(tuple(checks))
+    return Confirmation(tuple(checks), leg.shape())
+
+
+def _mean(values: list[float]) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    return statistics.fmean(finite) if finite else math.nan
+
+
+def rounded(value: float, digits: int = 3) -> float | None:
+    return None if not math.isfinite(value) else round(value, digits)

@@ -79,6 +79,7 @@ def summary(walks: list[Walk], floor: Floor, seconds: float) -> dict:
         "frame_contact_share": rounded(worst(w.frame_contact for w in walks), 3),
         "frailty": frailest(walks),
         "invalid": any(w.invalid for w in walks),
+        "spacers": walks[0].spacers if walks else {},
         "chaotic": chaotic(walks),
         "caveats": caveats(walks),
     }
@@ -90,7 +91,9 @@ def frailest(walks: list[Walk]) -> dict | None:
     found = [w.frailty for w in walks if w.frailty is not None]
     if not found:
         return None
-    return max(found, key=lambda f: (RANK[f.verdict], f.nominal.give_mm)).as_dict()
+    return max(
+        found, key=lambda f: (RANK[f.verdict], f.nominal.give_mm, f.nominal.axle_moment_nmm)
+    ).as_dict()
 
 
 def chaotic(walks: list[Walk]) -> bool:

@@ -25,12 +25,16 @@ the beam (`Section`) gives, at every stance pose:
   (`M c / I`);
 - **pin moment**: the walk's 99th-percentile pin force levered by the widest layer offset
   a pin of the leg bridges (all of it with the pin held at one end, half with it held at
-  both).
+  both);
+- **axle moment**: the load on the motor's axle, held in the horn at the frame's side,
+  levered by how far out the foot's layers sit (`Frame.leg_plane`, the leg's spacers,
+  `sim.robot.mounting`, and its own layers).
 
 Two kinds of limit, each argued in docs/walking.md ("Frail legs"): **stiffness**, the
 foot's vertical give (sag and the splay's drop) against the step height it defeats, the
-lift of its own path (`LIFT_SHARE`); **strength**, the stress against ABS's yield and the
-pin moment against a Technic pin's bending yield. Every parameter has a range (`RANGES`),
+lift of its own path (`LIFT_SHARE`); **strength**, the stress against ABS's yield, the
+pin moment against a Technic pin's bending yield and the axle moment against a cross
+axle's. Every parameter has a range (`RANGES`),
 and the verdict is three-valued: **frail** when a limit is passed even at the end of the
 ranges most in the leg's favour, **sound** when none is at the end least in its favour,
 **uncertain** in between, with the ranges printed. The walk itself stays rigid: the
@@ -51,6 +55,7 @@ from linkevo.sim.robot.hexapod import BEAM_KG_PER_MODULE, LAYER_PITCH_M, UNIT_M,
 from linkevo.sim.robot.leg import Leg
 
 if TYPE_CHECKING:
+    from linkevo.sim.robot.mounting import Mounting
     from linkevo.sim.robot.walking import Walk
 
 G = 9.81
@@ -78,6 +83,7 @@ class Section:
         pin_yield_nmm: the bending moment at which a Technic pin yields.
         pin_lever: the share of the widest layer offset a pin bridges that levers its
             force: 1 with the pin held at one end only, 0.5 held at both.
+        axle_yield_nmm: the bending moment at which the motor's cross axle yields.
     """
 
     e_n_mm2: float
@@ -87,6 +93,7 @@ class Section:
     yield_mpa: float
     pin_yield_nmm: float
     pin_lever: float
+    axle_yield_nmm: float
 
 
 RANGES: dict[str, tuple[float, float, float]] = {
@@ -97,13 +104,16 @@ RANGES: dict[str, tuple[float, float, float]] = {
     "yield_mpa": (35.0, 40.0, 45.0),
     "pin_yield_nmm": (350.0, 390.0, 430.0),
     "pin_lever": (0.5, 0.75, 1.0),
+    "axle_yield_nmm": (300.0, 390.0, 490.0),
 }
 """Each parameter's (low, nominal, high), from: ABS datasheets (E 2.0-2.6 GPa, tensile
 yield 35-45 MPa); a liftarm 7.2 mm thick and 7.8-8.0 mm deep with 4.8 mm holes counterbored
 to 6.2 mm, its section averaged along the beam (in the plane about 200 mm^4, out of it
 118-130); a few tenths of a millimetre of radial play over a pin's 8 mm of engagement
 (0.3-0.7°); a pin's 4.8 mm hollow shaft yielding at about 350-430 N·mm; a pin held by the
-beams at both ends of its span (lever half the span) or at one end only (the whole span)."""
+beams at both ends of its span (lever half the span) or at one end only (the whole span);
+a cross axle's section (4.8 mm across, arms 1.8 mm: about 7.5 mm^3 of section modulus)
+at the yield of the plastics axles are moulded from (40-65 MPa)."""
 STIFFER = {
     "e_n_mm2": True,
     "i_in_mm4": True,
@@ -112,6 +122,7 @@ STIFFER = {
     "yield_mpa": True,
     "pin_yield_nmm": True,
     "pin_lever": False,
+    "axle_yield_nmm": True,
 }
 """Whether a higher value of each parameter is in a leg's favour."""
 
@@ -140,6 +151,8 @@ class Geometry:
             it does not hang), at each stance pose.
         hang_cos: (S,) the cosine of that beam's angle from the horizontal.
         bridged_mm: the widest layer offset a pin of the leg bridges.
+        axle_mm: how far out from the frame's side the foot's layers sit (the lever of the
+            load on the motor's axle).
     """
 
     load_n: float
@@ -150,6 +163,7 @@ class Geometry:
     hang_mm: np.ndarray
     hang_cos: np.ndarray
     bridged_mm: float
+    axle_mm: float
 
 
 @dataclass(frozen=True)
@@ -161,6 +175,7 @@ class Figures:
     give_mm: float
     stress_mpa: float
     pin_moment_nmm: float
+    axle_moment_nmm: float
 
     def limits_passed(self, geometry: Geometry, section: Section) -> list[str]:
         """Returns which limits these figures pass (empty when none)."""
@@ -180,6 +195,12 @@ class Figures:
             out.append(
                 f"a pin is bent out of the plane by {self.pin_moment_nmm:.0f} N·mm (a pin "
                 f"yields at {section.pin_yield_nmm:g})"
+            )
+        if self.axle_moment_nmm > section.axle_yield_nmm:
+            out.append(
+                f"the motor's axle is bent by {self.axle_moment_nmm:.0f} N·mm, the leg "
+                f"{geometry.axle_mm:.0f} mm out from the frame (an axle yields at "
+                f"{section.axle_yield_nmm:g})"
             )
         return out
 
@@ -228,6 +249,8 @@ class Frailty:
             "splay_mm": span("splay_mm"),
             "stress_mpa": span("stress_mpa", 1),
             "pin_moment_nmm": span("pin_moment_nmm", 1),
+            "axle_moment_nmm": span("axle_moment_nmm", 1),
+            "axle_mm": round(self.geometry.axle_mm, 1),
             "foot_load_n": round(self.geometry.load_n, 2),
             "frail": self.frail,
             "limits_passed": self.worst.limits_passed(self.geometry, WORST),
@@ -253,8 +276,10 @@ def foot_load_n(frame: Frame, leg: Leg) -> float:
     return (frame.mass_kg + legs_kg) * G / 2.0
 
 
-def geometry(leg: Leg, frame: Frame | None = None) -> Geometry:
-    """Returns what the leg's build and its walk's loads set (`Geometry`)."""
+def geometry(leg: Leg, frame: Frame | None = None, spacer: int = 0) -> Geometry:
+    """Returns what the leg's build, `spacer` layers out from the frame, and its walk's loads
+    set (`Geometry`)."""
+    frame = frame or Frame()
     unit_mm, pitch_mm = UNIT_M * 1000.0, LAYER_PITCH_M * 1000.0
     motor = int(leg.frame_nodes[0])
     path = leg.foot_path()
@@ -283,7 +308,7 @@ def geometry(leg: Leg, frame: Frame | None = None) -> Geometry:
         if layers.size >= 2:
             bridged = max(bridged, int(layers.max() - layers.min()))
     return Geometry(
-        load_n=foot_load_n(frame or Frame(), leg),
+        load_n=foot_load_n(frame, leg),
         lift_mm=float(np.ptp(y)) * unit_mm,
         reach_mm=reach,
         offset_mm=offset,
@@ -291,6 +316,7 @@ def geometry(leg: Leg, frame: Frame | None = None) -> Geometry:
         hang_mm=hang,
         hang_cos=cos,
         bridged_mm=bridged * pitch_mm,
+        axle_mm=frame.leg_plane * 1000.0 + (spacer + float(foot_layers.mean())) * pitch_mm,
     )
 
 
@@ -313,18 +339,22 @@ def figures(g: Geometry, s: Section, pin_force_p99_n: float) -> Figures:
         give_mm=float(give[worst]),
         stress_mpa=stress,
         pin_moment_nmm=pin_force_p99_n * g.bridged_mm * s.pin_lever,
+        axle_moment_nmm=w * g.axle_mm,
     )
 
 
-def frailty(leg: Leg, pin_force_p99_n: float, frame: Frame | None = None) -> Frailty:
+def frailty(
+    leg: Leg, pin_force_p99_n: float, frame: Frame | None = None, spacer: int = 0
+) -> Frailty:
     """Returns the leg's frailty under its walk's loads (module docstring).
 
     Args:
         leg: the leg as walked (its layers, its nodes' paths in modules).
         pin_force_p99_n: the walk's 99th-percentile pin force (`Walk.pin_force_n[2]`).
         frame: the chassis (its mass loads the feet; default: the study's robot).
+        spacer: the spacer layers between the frame and the leg (`sim.robot.mounting`).
     """
-    g = geometry(leg, frame)
+    g = geometry(leg, frame, spacer)
     best, nominal, worst = (figures(g, s, pin_force_p99_n) for s in (BEST, NOMINAL, WORST))
     if best.limits_passed(g, BEST):
         verdict = FRAIL
@@ -338,13 +368,22 @@ def frailty(leg: Leg, pin_force_p99_n: float, frame: Frame | None = None) -> Fra
 RANK = {SOUND: 0, UNCERTAIN: 1, FRAIL: 2}
 
 
-def judge_frailty(result: Walk, legs: dict[str, Leg], frame: Frame) -> Walk:
-    """Returns the walk with its legs' frailty (`sim.robot.frailty`, the frailest leg) and, for a
-    frail leg, "frail" among its break reasons."""
+def judge_frailty(result: Walk, mounting: Mounting) -> Walk:
+    """Returns the walk with its legs' frailty as mounted (the frailest leg) and, for a frail
+    leg, "frail" among its break reasons."""
     if result.diverged or result.invalid:  # no loads to judge a leg by
         return result
-    distinct = {id(leg): leg for leg in legs.values()}.values()
-    found = [frailty(leg, result.pin_force_n[2], frame) for leg in distinct]
-    worst = max(found, key=lambda f: (RANK[f.verdict], f.nominal.give_mm, f.nominal.pin_moment_nmm))
+    distinct = {(id(mounting.legs[s]), mounting.spacers[s]): s for s in mounting.legs}.values()
+    p99 = result.pin_force_n[2]
+    found = [frailty(mounting.legs[s], p99, mounting.frame, mounting.spacers[s]) for s in distinct]
+    worst = max(
+        found,
+        key=lambda f: (
+            RANK[f.verdict],
+            f.nominal.give_mm,
+            f.nominal.pin_moment_nmm,
+            f.nominal.axle_moment_nmm,
+        ),
+    )
     reason = "; ".join(r for r in (result.reason, worst.reason()) if r)
     return dataclasses.replace(result, frailty=worst, breaks=bool(reason), reason=reason)

@@ -7,10 +7,11 @@ extensions), a hinge per pin, the crank's hinge driven by the leg's motor; every
 closes a loop as one `connect` equality placed at the assembled pose, so the loops start
 closed. The linkage's plane is the robot's side plane, its y axis up, mounted facing the
 way its stance pushes the robot (`Leg.facing`: a builder turns a leg round that would walk
-the robot backwards), and each beam sits `layer` pitches outside the frame. A right-side
-leg is the mirror image of a left-side one, so in its own frame every leg turns the same
-way. Only beams and the frame touch the floor; beams pass through each other (they are on
-layers).
+the robot backwards), and each beam sits `layer` pitches outside the frame, beyond its
+slot's spacers (`sim.robot.mounting`). A right-side leg is the mirror image of a left-side
+one, so in its own frame every leg turns the same way. Only beams and the frame touch the
+floor; beams pass through each other (they are on layers; legs that meet on a shared layer
+are caught by `sim.robot.mounting.strikes`).
 """
 
 from __future__ import annotations
@@ -92,6 +93,7 @@ def build_robot(
     motor: Motor | None = None,
     timestep: float = TIMESTEP_S,
     drop: float = 0.002,
+    spacers: dict[str, int] | None = None,
 ) -> RobotModel:
     """Returns the compiled robot standing just above the floor.
 
@@ -100,14 +102,20 @@ def build_robot(
         phases: each slot's crank angle at the start, radians (its pose is built there).
         floor: the floor's contact.
         frame, motor: the chassis and motor (defaults: the study's robot).
+        spacers: each slot's spacer layers between the frame and the leg
+            (`sim.robot.mounting`; default none).
         timestep: physics step in seconds.
         drop: gap between the lowest point and the floor at the start, metres.
     """
     frame = frame or Frame()
     motor = motor or Motor()
     check_slots(legs, phases)
+    spacers = spacers or dict.fromkeys(LEG_SLOTS, 0)
     spec, body = robot_spec(floor, frame, timestep)
-    builders = [_LegBuilder(spec, body, s, legs[s], phases[s], frame, timestep) for s in LEG_SLOTS]
+    builders = [
+        _LegBuilder(spec, body, s, legs[s], phases[s], frame, spacers[s], timestep)
+        for s in LEG_SLOTS
+    ]
     for slot in LEG_SLOTS:
         add_motor(spec, slot, motor)
     lowest = min(leg.lowest for leg in builders)
@@ -123,7 +131,7 @@ def build_robot(
         n_loops=sum(len(b.pin_names) for b in builders),
     )
     foot_layers = {b.slot: b.foot_layer for b in builders}
-    return robot_model(model, legs, phases, loads, motor, frame, foot_layers)
+    return robot_model(model, legs, phases, loads, motor, frame, foot_layers, spacers)
 
 
 class _LegBuilder:
@@ -137,11 +145,12 @@ class _LegBuilder:
         leg: Leg,
         phase: float,
         frame: Frame,
+        spacer: int,
         timestep: float,
     ) -> None:
         self.slot = slot
         self._timestep = timestep
-        self._world = leg_frame(slot, leg, frame)
+        self._world = leg_frame(slot, leg, frame, spacer)
         self._facing = leg.facing()
         nodes = leg.pose(phase)  # (M, 2) modules
         self.body_names: list[str] = []

@@ -257,11 +257,17 @@ PHYSICS_KEYS: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Physics
 """The names `[physics]`, `--params` and a grid's `physics` table accept."""
 
 
+ROBOT_PARTS: tuple[str, ...] = ("physics", "gait", "phases", "mounting")
+"""The parts of a robot that can differ from the study's (`Robot.changed`)."""
+
+
 @dataclass(frozen=True)
 class Robot:
     """The robot a walk walks, whole as its robot config describes it (`hardware.config`,
-    `RobotConfig.robot`): its physics (frame, motor, floors), its gait (speed and PID) and
-    each slot's phase offset (the tripods; from the motors' names and `phase_deg`).
+    `RobotConfig.robot`): its physics (frame, motor, floors), its gait (speed and PID),
+    each slot's phase offset (the tripods; from the motors' names and `phase_deg`) and each
+    slot's spacer layers between the frame and its leg (`[mounting]`; None: chosen for each
+    linkage so that neighbouring legs cannot meet, `sim.robot.mounting.auto_spacers`).
 
     Every command that walks reads all three alike: `hexapod simulate`, `study` and
     `calibrate`, walk maps and walking trials. The defaults are the study's robot.
@@ -270,6 +276,7 @@ class Robot:
     physics: Physics = field(default_factory=Physics)
     gait: GaitConfig = field(default_factory=GaitConfig)
     phases_deg: dict[str, float] = field(default_factory=lambda: dict(TRIPOD_OFFSETS_DEG))
+    spacers: dict[str, int] | None = None
 
     def __post_init__(self) -> None:
         if sorted(self.phases_deg) != sorted(LEG_SLOTS):
@@ -285,11 +292,13 @@ class Robot:
             )
             if wrong:
                 raise ValueError(wrong)
+        if self.spacers is not None:
+            check_spacers(self.spacers)
 
     def changed(self) -> dict[str, dict[str, float]]:
         """Returns what differs from the study's robot, by part ("physics", "gait",
-        "phases"; a part with no change left out): what identifies another robot, as a
-        walk map's tag and a trial's settings record it."""
+        "phases", "mounting"; a part with no change left out): what identifies another
+        robot, as a walk map's tag and a trial's settings record it."""
         default = GaitConfig()
         parts = {
             "physics": self.physics.changed(),
@@ -299,6 +308,7 @@ class Robot:
                 if getattr(self.gait, f.name) != getattr(default, f.name)
             },
             "phases": {s: v for s, v in self.phases_deg.items() if v != TRIPOD_OFFSETS_DEG[s]},
+            "mounting": self.spacers or {},
         }
         return {k: v for k, v in parts.items() if v}
 
@@ -309,9 +319,9 @@ class Robot:
         Raises:
             ValueError: naming an unknown part, key or a value out of its range.
         """
-        unknown = sorted(set(changed) - {"physics", "gait", "phases"})
+        unknown = sorted(set(changed) - set(ROBOT_PARTS))
         if unknown:
-            raise ValueError(f"robot: unknown part(s) {unknown}; allowed: physics, gait, phases")
+            raise ValueError(f"robot: unknown part(s) {unknown}; allowed: {', '.join(ROBOT_PARTS)}")
         gait = changed.get("gait", {})
         names = [f.name for f in dataclasses.fields(GaitConfig)]
         if sorted(set(gait) - set(names)):
@@ -330,4 +340,26 @@ class Robot:
             physics=Physics.of(changed.get("physics", {})),
             gait=GaitConfig(**{k: float(v) for k, v in gait.items()}),
             phases_deg={**TRIPOD_OFFSETS_DEG, **changed.get("phases", {})},
+            spacers=changed.get("mounting") or None,
         )
+
+
+MAX_SPACERS = 8
+"""The most spacer layers a robot config may give a leg (64 mm: with the leg's own layers,
+about the longest Technic axle, 12 modules, held in the motor's horn)."""
+
+
+def check_spacers(spacers: dict) -> None:
+    """Raises ValueError unless `spacers` gives each of the six slots a whole number of
+    spacer layers from 0 to `MAX_SPACERS` (a robot config's `[mounting]`)."""
+    if sorted(spacers) != sorted(LEG_SLOTS):
+        raise ValueError(
+            f"[mounting] names {sorted(spacers)}; give all six slots ({', '.join(LEG_SLOTS)}) "
+            "their spacer layers, or leave the section out to have them chosen for each leg"
+        )
+    for slot, value in spacers.items():
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= MAX_SPACERS:
+            raise ValueError(
+                f"[mounting] {slot} = {value!r}: allowed a whole number of layers, 0 to "
+                f"{MAX_SPACERS}"
+            )

@@ -251,6 +251,7 @@ def build_lean_robot(
     motor: Motor | None = None,
     timestep: float = LEAN_TIMESTEP_S,
     drop: float = 0.002,
+    spacers: dict[str, int] | None = None,
 ) -> RobotModel:
     """Returns the lean robot standing just above the floor; arguments as
     `sim.robot.full_model.build_robot`. Its `loads` (a `Coupling`) hold the equalities to
@@ -258,6 +259,7 @@ def build_lean_robot(
     frame = frame or Frame()
     motor = motor or Motor()
     check_slots(legs, phases)
+    spacers = spacers or dict.fromkeys(LEG_SLOTS, 0)
     reach = {s: floor_reach(legs[s]) for s in LEG_SLOTS}
     coupled = {s: [int(p) for p in np.unique(legs[s].part[reach[s]])] for s in LEG_SLOTS}
     carried = sum(
@@ -270,7 +272,7 @@ def build_lean_robot(
     foot_layers: dict[str, int] = {}
     lowest = -frame.height / 2
     for i, slot in enumerate(LEG_SLOTS):
-        leg, world = legs[slot], leg_frame(slot, legs[slot], frame)
+        leg, world = legs[slot], leg_frame(slot, legs[slot], frame, spacers[slot])
         pose = _pose_index(leg, phases[slot])
         nodes = leg.paths[:, pose]
         axle = world(nodes[0], 0)
@@ -329,7 +331,7 @@ def build_lean_robot(
         statics=tuple(statics[id(legs[s])] for s in LEG_SLOTS),
         n_poses=legs[LEG_SLOTS[0]].paths.shape[1],
     )
-    return robot_model(model, legs, phases, coupling, motor, frame, foot_layers)
+    return robot_model(model, legs, phases, coupling, motor, frame, foot_layers, spacers)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ import numpy as np
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.decoding import NODE_KINDS, LinkageBatch, decode
 from linkevo.sim.linkage.kinematics import simulate
+from linkevo.sim.robot.hexapod import UNIT_M
 from linkevo.sim.robot.layers import layer_plan
 from linkevo.sim.robot.lego import QuantiseError, whole_module_build
 from linkevo.sim.study import DEFAULT_ANGLES
@@ -82,6 +83,32 @@ class Leg:
         the furthest a foot that does not slip can push the robot in one stance."""
         x = self.foot_path()[:, 0]
         return float(x.max() - x.min())
+
+    def crank_share(self) -> float:
+        """Returns how much of the crank's turn reaches the foot as a turn about the motor's
+        axle over the stance (the lower half of the foot's path): 1 for a foot that rides
+        the crank as a wheel's rim does, near 0 for a foot pushed along a flat stance."""
+        path = self.foot_path()
+        axle = self.paths[self.frame_nodes[0], 0]
+        low = path[:, 1] <= (path[:, 1].min() + path[:, 1].max()) / 2
+        angle = np.arctan2(path[:, 1] - axle[1], path[:, 0] - axle[0])
+        turn = np.angle(np.exp(1j * (np.roll(angle, -1) - angle)))  # (A,) each step's turn
+        both = low & np.roll(low, -1)
+        crank = both.sum() * 2 * np.pi / len(path)
+        return float(abs(turn[both].sum()) / crank) if crank else 0.0
+
+    def shape(self) -> dict[str, float | list[float]]:
+        """Returns what a builder sees of the leg, in cm: its size over the turn (every
+        node's reach, width and height), its stance stroke and lift, and its crank share
+        (`crank_share`), rounded for a document."""
+        cm = UNIT_M * 100
+        reach = np.ptp(self.paths.reshape(-1, 2), axis=0) * cm
+        return {
+            "size_cm": [round(float(v), 1) for v in reach],
+            "stroke_cm": round(self.stance_stroke() * cm, 1),
+            "lift_cm": round(float(np.ptp(self.foot_path()[:, 1])) * cm, 1),
+            "crank_share": round(self.crank_share(), 2),
+        }
 
 
 @dataclass(frozen=True)

@@ -199,10 +199,11 @@ def robot_spec(floor: Floor, frame: Frame, timestep: float, extra_kg: float = 0.
     return spec, body
 
 
-def leg_frame(slot: str, leg: Leg, frame: Frame):
+def leg_frame(slot: str, leg: Leg, frame: Frame, spacer: int = 0):
     """Returns a function mapping a linkage point (2,) in modules on a layer to its (3,)
-    position in the frame's coordinates: the leg's plane is the frame's side plane, its
-    y axis up, mounted facing the way its stance pushes the robot (`Leg.facing`)."""
+    position in the frame's coordinates: the leg's plane is the frame's side plane, `spacer`
+    layers further out (`sim.robot.mounting`), its y axis up, mounted facing the way its
+    stance pushes the robot (`Leg.facing`)."""
     side = 1.0 if slot.startswith("left") else -1.0
     along = {"front": 1.0, "middle": 0.0, "rear": -1.0}[slot.split("-")[1]]
     axle = np.array([along * frame.leg_spacing, side * frame.width / 2, 0.0])
@@ -210,7 +211,7 @@ def leg_frame(slot: str, leg: Leg, frame: Frame):
 
     def world(node: np.ndarray, layer: int) -> np.ndarray:
         """(..., 2) linkage points in modules -> (..., 3) frame coordinates (m)."""
-        lateral = side * (frame.leg_plane + layer * LAYER_PITCH_M)
+        lateral = side * (frame.leg_plane + (spacer + layer) * LAYER_PITCH_M)
         node = np.asarray(node, dtype=float) * UNIT_M
         out = np.empty((*node.shape[:-1], 3))
         out[..., 0] = axle[0] + -facing * node[..., 0]
@@ -277,9 +278,11 @@ def robot_model(
     motor: Motor,
     frame: Frame,
     foot_layers: dict[str, int],
+    spacers: dict[str, int],
 ) -> RobotModel:
     """Returns the compiled model with where its parts are (names as both builders give
-    them) and each foot's kinematic path (its leg's foot node on `foot_layers[slot]`)."""
+    them) and each foot's kinematic path (its leg's foot node on `foot_layers[slot]`, the
+    leg `spacers[slot]` layers out)."""
 
     def ids(kind: mujoco.mjtObj, names: list[str]) -> np.ndarray:
         return np.array([mujoco.mj_name2id(model, kind, n) for n in names], dtype=np.int64)
@@ -298,7 +301,10 @@ def robot_model(
         loads=loads,
         motor=motor,
         foot_paths=np.stack(
-            [leg_frame(s, legs[s], frame)(legs[s].foot_path(), foot_layers[s]) for s in LEG_SLOTS]
+            [
+                leg_frame(s, legs[s], frame, spacers[s])(legs[s].foot_path(), foot_layers[s])
+                for s in LEG_SLOTS
+            ]
         ),
     )
 

@@ -77,7 +77,8 @@ class WalkRow(TypedDict):
     """One leg's walk on one floor (`COLUMNS`): the cell (-1 before a cell takes it), the
     floor, its `Status`, the mean distance (cm) in `seconds`, whether it breaks and why,
     the leg ("LEGO build" or "as evolved"), the level-body no-slip bound (cm), the motors'
-    95th-percentile torque over stall and the 99th-percentile pin force (N)."""
+    95th-percentile torque over stall, the 99th-percentile pin force (N) and the feet's
+    mean slip while down (mm/s, `sim.robot.walking.Walk.foot_slip_mm_s`)."""
 
     cell: int
     floor: str
@@ -89,6 +90,7 @@ class WalkRow(TypedDict):
     bound_cm: float
     torque_p95_of_stall: float
     pin_force_p99_n: float
+    foot_slip_mm_s: float
     seconds: float
 
 
@@ -97,6 +99,12 @@ COLUMNS: tuple[str, ...] = tuple(WalkRow.__annotations__)
 FLOOR_FIELDS: tuple[str, ...] = tuple(c for c in COLUMNS if c not in ("cell", "floor", "leg"))
 """A walk row's figures, kept per floor where a table holds a candidate's floors side by
 side (the walk log, `walks.parquet`'s `<floor>_<field>` columns)."""
+LATER_COLUMNS: tuple[str, ...] = ("foot_slip_mm_s",)
+"""Columns a walk table written before them lacks: read as NaN (unknown)."""
+SLIDING_SHARE = 0.5
+"""A walk whose feet slip, while down, at more than this share of the body's speed owes
+most of its distance to sliding, not stepping (`slide_share`): flagged where a user sees
+it (`linkevo pull`, the explorer, the report)."""
 LEGO_BUILD, AS_EVOLVED = "LEGO build", "as evolved"
 """A walk row's `leg`: the LEGO build, or the linkage as evolved where no build turns."""
 
@@ -113,6 +121,7 @@ def map_row(
     bound: float = math.nan,
     torque: float = math.nan,
     pins: float = math.nan,
+    slip: float = math.nan,
 ) -> WalkRow:
     """Returns a row from `base` (its cell and seconds) and the figures."""
     return {  # type: ignore[return-value]
@@ -126,6 +135,7 @@ def map_row(
         "bound_cm": float(bound),
         "torque_p95_of_stall": float(torque),
         "pin_force_p99_n": float(pins),
+        "foot_slip_mm_s": float(slip),
     }
 
 
@@ -142,6 +152,7 @@ def walked_row(base: dict, floor: str, w: Walk, leg: str) -> WalkRow:
         bound=w.bound_m * 100,
         torque=w.torque_p95,
         pins=w.pin_force_n[2],
+        slip=w.foot_slip_mm_s,
     )
 
 
@@ -156,6 +167,25 @@ def credited_cm(row: dict) -> float:
     distance, bound = row["mean_distance_cm"], row["bound_cm"]
     walked = min(distance, bound) if math.isfinite(bound) else distance
     return walked * WALK_SECONDS / row["seconds"]
+
+
+def slide_share(row: dict) -> float:
+    """Returns how fast a row's feet slip while down, as a share of the body's speed (NaN
+    where unknown or the robot did not move forwards): 0 for a walker whose feet stand
+    while they push, about 1 for a robot that skates on its feet."""
+    distance, slip = row["mean_distance_cm"], row.get("foot_slip_mm_s", math.nan)
+    if not (math.isfinite(distance) and math.isfinite(slip)) or distance <= 0:
+        return math.nan
+    return slip / (distance * 10.0 / row["seconds"])
+
+
+def beyond_bound_share(row: dict) -> float:
+    """Returns how far a row's walk goes beyond its level-body no-slip bound, as a share of
+    the bound (0 within it; NaN where unknown): what stepping cannot explain."""
+    distance, bound = row["mean_distance_cm"], row["bound_cm"]
+    if not (math.isfinite(distance) and math.isfinite(bound)) or bound <= 0:
+        return math.nan
+    return max(distance / bound - 1.0, 0.0)
 
 
 def walk_map_frame(rows: list[WalkRow]) -> pd.DataFrame:

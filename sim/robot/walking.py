@@ -39,6 +39,7 @@ from linkevo.sim.robot.hexapod import (
 from linkevo.sim.robot.lean_model import LEAN_TIMESTEP_S, build_lean_robot
 from linkevo.sim.robot.leg import Leg
 from linkevo.sim.robot.model import RobotModel, control_tick
+from linkevo.sim.robot.mounting import Mounting, auto_spacers
 from linkevo.sim.robot.walk_records import WalkRecords, foot_slip, wrap_angle, yaw_of
 
 MODELS = dict(
@@ -123,6 +124,8 @@ class Walk:
             with that reason and its distance is NaN, never a walk's.
         frailty: how far the real LEGO leg would give under the walk's loads
             (`sim.robot.frailty`; the frailest of the walked legs); a frail leg breaks the walk.
+        spacers: each slot's spacer layers between the frame and its leg
+            (`sim.robot.mounting`); legs that strike each other break the walk.
         trace: per control tick: "t" (T,), "body" (T, 3) frame position, "contact"
             (T, 6) bool each leg touching the floor, "phase" (T, 6) radians, "qpos"
             (T, nq) the whole state's positions (to replay the walk).
@@ -154,6 +157,7 @@ class Walk:
     stopped_s: float = math.nan
     frailty: Frailty | None = None
     invalid: bool = False
+    spacers: dict[str, int] = field(default_factory=dict)
 
 
 def walk(
@@ -168,6 +172,7 @@ def walk(
     motor: Motor | None = None,
     physics: Physics | None = None,
     robot: Robot | None = None,
+    spacers: dict[str, int] | None = None,
 ) -> Walk:
     """Walks the robot once and returns what happened.
 
@@ -181,13 +186,17 @@ def walk(
         frame, motor: the chassis and motor (defaults: the study's robot).
         physics: a robot's own parameters (`sim.robot.hexapod.Physics`): its floor, frame and
             motor replace `floor`'s contact, `frame` and `motor`.
-        robot: a robot whole (`sim.robot.hexapod.Robot`: its physics, gait and phases),
-            in place of `physics`, `gait` and `offsets_deg`.
+        robot: a robot whole (`sim.robot.hexapod.Robot`: its physics, gait, phases and
+            mounting), in place of `physics`, `gait`, `offsets_deg` and `spacers`.
+        spacers: each slot's spacer layers between the frame and its leg (default: chosen
+            so that neighbouring legs cannot meet, `sim.robot.mounting.auto_spacers`).
     """
     if robot is not None:
         physics, gait, offsets_deg = robot.physics, robot.gait, robot.phases_deg
+        spacers = robot.spacers
     if physics is not None:
         floor, frame, motor = physics.floor(floor.name), physics.frame(), physics.motor()
+    frame = frame or Frame()
     gait = gait or GaitConfig()
     settings = settings or WalkSettings()
     if settings.model not in MODELS:
@@ -207,16 +216,21 @@ def walk(
         top = START_JITTER["phase_deg"]
         jitter = np.radians(rng.integers(-top, top + 1, 6))
     start = dict(zip(LEG_SLOTS, offsets + jitter, strict=True))
+    if spacers is None:
+        spacers = auto_spacers(legs, dict(zip(LEG_SLOTS, offsets, strict=True)), frame.leg_spacing)
+    mounting = Mounting(legs, spacers, frame)
     build = MODELS[settings.model][0]
     while True:
-        robot = build(legs, start, floor, frame=frame, motor=motor, timestep=settings.step)
+        built = build(
+            legs, start, floor, frame=frame, motor=motor, timestep=settings.step, spacers=spacers
+        )
         if settings.sparse:
-            robot.model.opt.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE
+            built.model.opt.jacobian = mujoco.mjtJacobian.mjJAC_SPARSE
         with quiet_engine():
-            result = _Run(robot, gait, motor, frame or Frame(), settings, offsets).run(yaw, shift)
+            result = _Run(built, gait, motor, mounting, settings, offsets).run(yaw, shift)
         finer = settings.step / 2
         if not result.diverged or finer < MIN_TIMESTEP_S - 1e-12:
-            return judge_frailty(result, legs, frame or Frame())
+            return judge_frailty(result, mounting)
         # A stiff linkage can blow up at the default step: walk it again at half the step.
         settings = dataclasses.replace(settings, timestep=finer)
 
@@ -229,12 +243,12 @@ class _Run:
         robot: RobotModel,
         gait: GaitConfig,
         motor: Motor,
-        frame: Frame,
+        mounting: Mounting,
         settings: WalkSettings,
         offsets: np.ndarray,
     ) -> None:
         self.robot, self.gait, self.motor, self.settings = robot, gait, motor, settings
-        self.frame, self.offsets = frame, offsets
+        self.mounting, self.frame, self.offsets = mounting, mounting.frame, offsets
         m = robot.model
         self.data = mujoco.MjData(m)
         self.tick_steps = max(1, round(1.0 / gait.rate_hz / settings.step))
@@ -377,13 +391,16 @@ class _Run:
             model=self.robot.model,
             timestep=self.settings.step,
             foot_deviation_mm=float(deviation.max() * 1000),
+            spacers=self.mounting.spacers,
         )
         invalid = invalid_reason(walk, self.settings.model)
         if invalid:
             return dataclasses.replace(
                 walk, distance_m=math.nan, breaks=True, reason=invalid, invalid=True
             )
-        reason = break_reason(walk, lag)
+        reason = "; ".join(
+            r for r in (break_reason(walk, lag), self.mounting.strike(t, phases)) if r
+        )
         planned = round(self.settings.seconds * self.gait.rate_hz)
         if len(t) < planned and reason:
             stopped = len(t) / self.gait.rate_hz
@@ -415,6 +432,7 @@ class _Run:
             {},
             timestep=self.settings.step,
             diverged=True,
+            spacers=self.mounting.spacers,
         )
 
 

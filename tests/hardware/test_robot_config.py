@@ -8,6 +8,7 @@ import pytest
 
 from linkevo.hardware.config import load_config, parse_config
 from linkevo.sim.errors import ConfigError
+from linkevo.sim.robot.hexapod import LEG_SLOTS, Robot
 from tests.helpers.hexapod import raw_config, toml_text
 
 REPO = Path(__file__).resolve().parents[2]
@@ -62,6 +63,18 @@ def _motor_change(**change):
             r"choose one of \('stop', 'reboot'\)",
         ),
         (raw_config("x", safety={"min_voltage_v": 17.0}), r"min_voltage_v = 17.0 must be below"),
+        (
+            raw_config("x", mounting={"left-front": 1}),
+            r"\[mounting\] names \['left-front'\]; give all six slots",
+        ),
+        (
+            raw_config("x", mounting={**dict.fromkeys(LEG_SLOTS, 0), "left-rear": 9}),
+            r"\[mounting\] left-rear = 9: allowed a whole number of layers, 0 to 8",
+        ),
+        (
+            raw_config("x", mounting={**dict.fromkeys(LEG_SLOTS, 0), "left-rear": 1.5}),
+            r"left-rear = 1.5: allowed a whole number",
+        ),
     ],
 )
 def test_bad_values_are_named(raw, message):
@@ -83,3 +96,15 @@ def test_missing_file_and_bad_toml_are_named(tmp_path):
     bad.write_text("[bus\nport = 1", encoding="utf-8")
     with pytest.raises(ConfigError, match="is not valid TOML"):
         load_config(bad)
+
+
+def test_a_mounting_section_fixes_every_legs_spacers_and_identifies_the_robot(tmp_path):
+    spacers = {**dict.fromkeys(LEG_SLOTS, 0), "left-middle": 3, "right-middle": 3}
+    path = tmp_path / "robot.toml"
+    path.write_text(toml_text(raw_config("/dev/null", mounting=spacers)), encoding="utf-8")
+    robot = load_config(path).robot()
+    assert robot.spacers == spacers
+    assert robot.changed()["mounting"] == spacers
+    assert Robot.of(robot.changed()) == robot
+    left_out = load_config(REPO / "configs" / "hexapod.toml").robot()
+    assert left_out.spacers is None and "mounting" not in left_out.changed()

@@ -53,13 +53,13 @@ def walking_legs(config, count: int) -> list[dict]:
 def field_trials(tmp_path_factory):
     """A store with the real field trials of three legs, listed leg by leg, flat then
     carpet, walked by the hidden robot (`HIDDEN`) with noisy repeats; one simulated trial;
-    and two legs the calibration never sees, for the error on unseen legs."""
+    and four legs the calibration never sees, for the error on unseen legs."""
     root = tmp_path_factory.mktemp("calibrate")
     uri = f"sqlite:///{root / 'mlflow.db'}"
     experiment = ensure_experiment(uri)
     config = load_config(sim_config())
     hidden = with_values(config, HIDDEN)
-    docs = walking_legs(config, 5)
+    docs = walking_legs(config, 7)
     noise = np.random.default_rng(1)
     runs = []
     for n, doc in enumerate(docs[:3]):

@@ -279,7 +279,7 @@ def test_the_logged_page_works_inside_the_mlflow_ui(store, tmp_path, browser, ml
         browser.switch_to.default_content()
 
 
-def test_a_walk_beyond_the_level_body_bound_is_flagged_in_the_view(store, tmp_path):
+def test_a_walk_beyond_the_level_body_bound_or_sliding_is_flagged_in_the_view(store, tmp_path):
     from linkevo.sim.robot.walk_rows import walk_map_frame
 
     uri, runs = store
@@ -297,12 +297,14 @@ def test_a_walk_beyond_the_level_body_bound_is_flagged_in_the_view(store, tmp_pa
             "bound_cm": 100.0,
             "torque_p95_of_stall": 0.3,
             "pin_force_p99_n": 10.0,
+            "foot_slip_mm_s": slip,
             "seconds": 10.0,
         }
-        for c, d in zip(cells, (80.0, 130.0), strict=True)
+        for c, d, slip in zip(cells, (80.0, 130.0), (5.0, 100.0), strict=True)
     ]
     trial = TrialRun(runs["MAP-LIS"], "MAP-LIS/Fp/00", "MAP-LIS", "Fp", "paper", 40)
     view = repertoire_view(table, trial, 0, walk_map_frame(rows))
     walks = {c["c"]: c["w"][0] for c in view["cells"] if c["c"] in set(cells.tolist())}
-    assert walks[int(cells[0])] == [80.0, 0, "", 0]
-    assert walks[int(cells[1])] == [130.0, 0, "", 1]  # 130 cm against a 100-cm bound
+    assert walks[int(cells[0])] == [80.0, 0, "", 0, 0]
+    # 130 cm against a 100-cm bound, its feet slipping at 100 of the body's 130 mm/s
+    assert walks[int(cells[1])] == [130.0, 0, "", 1, 1]

@@ -96,6 +96,7 @@ def test_one_motor_is_refused_naming_the_slots(tmp_path, capsys):
         ("physics={frame_mass_kg=nan}", "frame_mass_kg = nan is not a finite number"),
         ("gait={speed_rpm=nan}", "speed_rpm = nan is not a finite number"),
         ("gait={pace=2.0}", "gait: unknown key(s) ['pace']"),
+        ("mounting={left-front=1}", "[mounting] names ['left-front']; give all six slots"),
     ],
 )
 def test_a_grids_bad_walking_keys_are_refused_by_their_key(tmp_path, capsys, override, said):

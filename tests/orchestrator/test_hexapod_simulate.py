@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import csv
 import json
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,11 +15,14 @@ from mlflow.tracking import MlflowClient
 from linkevo import sim
 from linkevo.orchestrator.cli import main
 from linkevo.sim.linkage.linkage_doc import to_document
+from linkevo.sim.robot.hexapod import LEG_SLOTS, UNIT_M, Frame
 from linkevo.sim.robot.leg import LegError, leg_from_genome
+from linkevo.sim.robot.mounting import robot_spacers
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.tracking import ensure_experiment
 
 GRID = "abcdef012345"
+REPO = Path(__file__).resolve().parents[2]
 
 
 def walkable(genomes: np.ndarray, count: int) -> list[int]:
@@ -156,6 +161,33 @@ def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_pat
     assert "flat floor" in text and "distance" in text and "full model" in text
     for name in ("walk.gif", "walk.png", "path.png", "contacts.png"):
         assert (out / name).stat().st_size > 1000
+
+
+def test_a_leg_wider_than_the_spacing_is_mounted_apart_or_strikes_its_neighbours(tmp_path, capsys):
+    genomes = sim.random_genomes(np.random.default_rng(5), 400)
+    for genome in genomes:  # the first leg whose neighbours would meet on the study's frame
+        try:
+            leg = leg_from_genome(genome)
+        except LegError:
+            continue
+        spacers = robot_spacers(leg)
+        if any(spacers.values()):
+            break
+    assert np.ptp(leg.foot_path()[:, 0]) * UNIT_M > 0.5 * Frame().leg_spacing
+    doc = tmp_path / "wide.json"
+    doc.write_text(json.dumps(to_document(genome)))
+    walk = ["hexapod", "simulate", "--linkage", str(doc), "--floor", "flat", "--seconds", "2"]
+    walk += ["--repeats", "1", "--no-log", "--json"]
+    assert main(walk) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["spacers"] == spacers and "strike" not in result["reason"]
+    built = tmp_path / "robot.toml"  # the same robot with every leg straight on its axle
+    text = (REPO / "configs" / "hexapod.toml").read_text()
+    built.write_text(text + "\n[mounting]\n" + "".join(f"{s} = 0\n" for s in LEG_SLOTS))
+    assert main([*walk, "--config", str(built)]) == 0
+    struck = json.loads(capsys.readouterr().out)
+    assert struck["breaks"] and struck["spacers"] == dict.fromkeys(LEG_SLOTS, 0)
+    assert re.search(r"the (\w+-\w+) and (\w+-\w+) legs strike each other", struck["reason"])
 
 
 @pytest.mark.parametrize(

@@ -14,6 +14,8 @@ from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.pull import build_sheet
 from linkevo.sim.linkage.linkage_doc import FORMAT, to_document
 from linkevo.sim.linkage.physical import physical_checks
+from linkevo.sim.robot.leg import leg_from_genome
+from linkevo.sim.robot.mounting import robot_spacers
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.tracking import ensure_experiment
 
@@ -96,6 +98,9 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
     assert pulled["format"] == FORMAT and pulled["meta"]["run_id"] == runs[0]
     assert pulled["checks"] == to_document(genomes[valid[0]])["checks"]
     assert "Checks: " in (out / "build_sheet.md").read_text()
+    leg = leg_from_genome(genomes[valid[0]])
+    assert pulled["mounting"] == robot_spacers(leg)  # the study's robot, chosen as walked
+    assert "Mounting: " in sheet
 
 
 def test_pull_a_cell_by_its_bin_coordinates_and_list_the_cells(store, tmp_path, capsys):
@@ -247,3 +252,45 @@ def test_pull_never_creates_a_store(tmp_path, capsys):
     assert not folder.exists()
     assert main(["pull", "x", "--tracking-uri", "ftp://host/x", "--out", str(tmp_path)]) == 2
     assert "scheme 'ftp' is not supported" in capsys.readouterr().err
+
+
+def test_pull_of_a_walking_trials_best_says_how_the_full_model_walked_it(store, tmp_path, capsys):
+    uri, _, genomes, valid = store
+    client = MlflowClient(uri)
+    tags = {"grid_id": "fedcba987654", "linkevo.kind": "trial", "approach": "MAP-LIS"}
+    run = client.create_run("1", tags={**tags, "fitness": "Fw", "trial_key": "MAP-LIS/Fw/00"})
+    run_id = run.info.run_id
+    client.log_param(run_id, "mode", "paper")
+    client.log_metric(run_id, "best_loss", -60.0)
+    genome = genomes[valid[0]]
+    floor = {"full_breaks": False, "chaotic": False, "agrees": True, "slides": False}
+    confirmed = {
+        "genome": genome.tolist(),
+        "agrees": False,
+        "chaotic": False,
+        "slides": True,
+        "shape": {"size_cm": [20.0, 15.0], "stroke_cm": 9.0, "lift_cm": 3.0, "crank_share": 0.9},
+        "repeats": 5,
+        "floors": {
+            "flat": {**floor, "full_mean_cm": 81.25, "slide_share": 0.7, "slides": True},
+            "carpet": {**floor, "full_mean_cm": None, "full_breaks": True, "agrees": False},
+        },
+    }
+    folder = tmp_path / "art"
+    folder.mkdir()
+    write_json_atomic(folder / "best_linkage.json", to_document(genome))
+    write_json_atomic(folder / "best_confirmed.json", confirmed)
+    client.log_artifacts(run_id, str(folder))
+    client.set_terminated(run_id)
+    out = tmp_path / "pulled"
+    assert main(["pull", run_id, "--tracking-uri", uri, "--out", str(out)]) == 0
+    said = (
+        "flat 81.2 cm; carpet breaks per 10 s on the full model (5 hand-placed starts per "
+        "floor); it DISAGREES with the lean model; SLIDES: most of its distance is its feet "
+        "sliding"
+    )
+    assert f"confirmed walk: {said}" in capsys.readouterr().err
+    assert f"Confirmed walk: {said}." in (out / "build_sheet.md").read_text()
+    pulled = json.loads((out / "linkage.json").read_text())
+    assert pulled["confirmed_walk"]["floors"]["flat"]["slide_share"] == 0.7
+    assert "genome" not in pulled["confirmed_walk"]

@@ -511,3 +511,37 @@ def test_every_report_figure_is_readable_at_page_width(loaded):
     maps = next(m for m in made if m.name == "repertoire_maps")
     titles = [ax.get_title() for ax in maps.figure.axes if ax.get_title()]
     assert any("MAP-AU" in t and "POOLED" in t for t in titles) == ("MAP-AU" in SPEC.approaches)
+
+
+def test_a_walking_grids_winners_are_tabled_with_the_ones_to_doubt_named():
+    from linkevo.orchestrator.report.checks import walking_winners
+    from linkevo.orchestrator.report.html import winners_html
+    from linkevo.orchestrator.report.load import WALK_MEASURES, GridData
+
+    sound = dict.fromkeys(WALK_MEASURES, 50.0) | {
+        "best_models_agree": 1.0,
+        "best_chaotic": 0.0,
+        "best_slides": 0.0,
+    }
+    rows = [
+        {"trial_key": "MAP-LIS/Fw/00", "approach": "MAP-LIS", "fitness": "Fw", **sound},
+        {
+            "trial_key": "NSGA2/Fw/00",
+            "approach": "NSGA2",
+            "fitness": "Fw",
+            **sound,
+            "best_slides": 1.0,
+            "best_models_agree": 0.0,
+        },
+        {"trial_key": "EA/Fp/00", "approach": "EA", "fitness": "Fp"},
+    ]
+    trials = pd.DataFrame(rows).assign(status="FINISHED", best_loss=-50.0)
+    grid = GridData("g", "p", "sqlite://", {}, trials, pd.DataFrame())
+    winners = walking_winners(grid)
+    assert list(winners.trial_key) == ["NSGA2/Fw/00", "MAP-LIS/Fw/00"]  # the study's order
+    page = winners_html(winners)
+    assert (
+        "<li>NSGA2/Fw/00: the full model disagrees with the lean one; its distance is mostly "
+        "its feet sliding</li>" in page
+    )
+    assert "MAP-LIS/Fw/00:" not in page

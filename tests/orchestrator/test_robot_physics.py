@@ -14,7 +14,7 @@ from linkevo.hardware.config import parse_config
 from linkevo.orchestrator.cli import main
 from linkevo.orchestrator.config import GridConfig
 from linkevo.sim.errors import ConfigError
-from linkevo.sim.robot.hexapod import FLOORS, Frame, Motor, Physics
+from linkevo.sim.robot.hexapod import FLOORS, LEG_SLOTS, Frame, Motor, Physics
 from linkevo.workers.trial_spec import TrialSpec, TrialSpecError
 
 SHIPPED = Path(__file__).parents[2] / "configs" / "hexapod.toml"
@@ -52,6 +52,12 @@ def test_a_grid_and_a_trial_carry_their_robot():
         GridConfig(**walking, physics={"mass": 2.5})
     with pytest.raises(TrialSpecError, match=r"physics carpet_friction = 9\.0 is out of range"):
         TrialSpec.walking("MAP-LIS", 4, physics={"carpet_friction": 9.0})
+    apart = {**dict.fromkeys(LEG_SLOTS, 0), "left-middle": 2, "right-middle": 2}
+    mounted = GridConfig(**walking, mounting=apart)
+    assert mounted.identity()["mounting"] == apart and "mounting" not in heavy.identity()
+    assert TrialSpec.walking("MAP-LIS", 4, mounting=apart).robot().spacers == apart
+    with pytest.raises(TrialSpecError, match=r"\[mounting\] left-rear = -1: allowed a whole"):
+        TrialSpec.walking("MAP-LIS", 4, mounting={**apart, "left-rear": -1})
 
 
 def test_an_fw_trial_walks_the_robot_its_config_describes(tmp_path):

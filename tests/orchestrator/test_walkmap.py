@@ -13,7 +13,7 @@ import pytest
 from mlflow.tracking import MlflowClient
 
 from linkevo.orchestrator.cli import main
-from linkevo.orchestrator.repertoire_walks import Selection, run_in_process, walk_map
+from linkevo.orchestrator.repertoire_walks import Selection, run_in_process, top_walkers, walk_map
 from linkevo.sim.robot.walk_map import build_cells
 from linkevo.workers.store.runs import RunStore
 from linkevo.workers.trial_spec import TrialSpec
@@ -121,6 +121,15 @@ def test_walkmap_walks_the_chosen_cells_on_both_floors_and_logs_the_map(store, l
             here = walked[walked["floor"] == floor]
             frail = int(here["reason"].str.contains("frail:").sum())
             assert f"{len(here) - len(sound)} break ({frail} frail)" in printed
+    # The top walkers, with their legs' shapes: the cells sound on both floors, best first.
+    walkers = top_walkers(frame, table, trial.mode)
+    both = walked[~walked["breaks"]].groupby("cell")["floor"].nunique()
+    assert [w["cell"] for w in walkers] == [w["cell"] for w in walkers if both[w["cell"]] == 2]
+    worst = [min(w["credited_cm"].values()) for w in walkers]
+    assert worst == sorted(worst, reverse=True) and len(walkers) == min(3, int((both == 2).sum()))
+    for w in walkers:
+        assert f"    cell {w['cell']}: flat {w['credited_cm']['flat']:.1f}" in printed
+        assert f"crank share {w['shape']['crank_share']:.2f}" in printed
 
 
 def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(

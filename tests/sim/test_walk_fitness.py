@@ -142,7 +142,9 @@ def test_caveats_name_what_a_builder_should_doubt():
         foot_deviation_mm=0.1,
     )
     assert caveats([plain]) == []
-    far = replace(plain, distance_m=1.5)
-    assert "1 of 2 walks go beyond the level-body bound (100 cm)" in caveats([plain, far])[0]
+    near, far = replace(plain, distance_m=0.98), replace(plain, distance_m=1.02)
+    assert "1 of 2 walks go beyond the level-body bound (100 cm)" in caveats([near, far])[0]
+    scattered = caveats([plain, replace(plain, distance_m=0.9)])
+    assert "a chaotic gait: the repeats walk 50 to 90 cm" in scattered[0]
     assert "pitches up to 31°" in caveats([replace(plain, max_pitch_deg=31.0)])[0]
     assert "feet stray up to 3.8 mm" in caveats([replace(plain, foot_deviation_mm=3.8)])[0]

@@ -75,6 +75,13 @@ def test_a_map_lis_walking_trial_walks_what_its_loss_claims(tmp_path):
 
     claimed = -json.loads((out / "result.json").read_text())["best_loss"]
     assert claimed > 30.0  # a sound walker, on the worse floor
+    confirmed = json.loads((out / "best_confirmed.json").read_text())
+    best = json.loads((out / "best_linkage.json").read_text())
+    assert confirmed["repeats"] == 5 and set(confirmed["floors"]) == {"flat", "carpet"}
+    assert {"size_cm", "stroke_cm", "lift_cm", "crank_share"} == set(confirmed["shape"])
+    assert f"crank share {confirmed['shape']['crank_share']:.2f}" in done.stdout
+    assert ("SLIDES" in done.stdout) == confirmed["slides"]
+    assert len(confirmed["genome"]) == len(best["genome"])
     log = pd.read_parquet(out / "walks.parquet")
     assert set(log["stage"]) <= {"walked", "cached", "no_lego_build", "no_turn", "failed"}
     assert (log["stage"] == "walked").sum() == metrics["walks"].iloc[-1]

@@ -22,7 +22,7 @@ from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.descriptors import DESCRIPTOR_SPACES, DescriptorSpace
 from linkevo.sim.linkage.genome import N_GENES
 from linkevo.sim.robot.walk_rows import COLUMNS as WALK_MAP_COLUMNS
-from linkevo.sim.robot.walk_rows import FLOOR_ORDER, STATUSES, Status
+from linkevo.sim.robot.walk_rows import FLOOR_ORDER, LATER_COLUMNS, STATUSES, Status
 
 REPERTOIRE_COLUMNS: tuple[str, ...] = ("cell", "loss", "genome")
 """The columns every reader of a repertoire or population needs (with its bins)."""
@@ -172,6 +172,7 @@ def read_walk_map(path: Path, run_id: str) -> pd.DataFrame:
     def fail(problem: str) -> ArtefactError:
         return ArtefactError(WALK_MAP, run_id, problem, remedy)
 
+    frame = frame.reindex(columns=[*frame.columns, *(set(LATER_COLUMNS) - set(frame.columns))])
     _check_cell_floor_rows(frame, WALK_MAP_COLUMNS, fail)
     unknown = sorted(set(frame["status"]) - STATUSES)
     if unknown:
