@@ -35,12 +35,13 @@ import pandas as pd
 
 from linkevo.orchestrator.pull import own_modules
 from linkevo.sim import decode, simulate
-from linkevo.sim.linkage.decoding import BEAM_KINDS, NODE_KINDS
+from linkevo.sim.linkage.decoding import BEAM_KINDS, NODE_KINDS, LinkageBatch
+from linkevo.sim.linkage.kinematics import Motion, take_rows
 from linkevo.sim.linkage.linkage_doc import DEFAULT_UNIT_MM, json_floats
 from linkevo.sim.linkage.physical import BUILDABLE_STRETCH, TOGGLE_DEG, physical_checks
 from linkevo.sim.robot.hexapod import in_floor_order
 from linkevo.sim.robot.walk_rows import SLIDING_SHARE, Status, beyond_bound_share, slide_share
-from linkevo.sim.study import FITNESSES, ordered
+from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
 from linkevo.workers.store.runs import RunStore, TrialRun
@@ -48,6 +49,9 @@ from linkevo.workers.store.tables import bin_columns, space_of
 
 GRID_DRAWN = 500
 """Cells per trial whose linkage a grid page draws by default (the lowest-loss ones)."""
+PARTS_CELLS = 200
+"""Cells per trial whose real Technic parts a page names (the lowest-loss ones that pass the
+2-D checks; `real_parts`): about 30 ms a cell."""
 TEMPLATE = "explorer_page.html"
 
 
@@ -82,7 +86,9 @@ def repertoire_view(
         the level-body no-slip bound 0/1, slides 0/1 (`sim.robot.walk_rows.SLIDING_SHARE`)]
         or None where the cell was not walked on it;
         with predicted walks p: per floor, [predicted cm, spread cm, probability of
-        breaking] or None. Positions are rounded
+        breaking] or None; for the `PARTS_CELLS` lowest-loss cells that pass the 2-D
+        checks, r (`real_parts`): the parts of one leg, or why real parts cannot build
+        it. Positions are rounded
         to 0.1 module, lengths to 0.01, descriptors to 0.001, distances to 0.1 cm.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
@@ -112,6 +118,7 @@ def repertoire_view(
     loss = json_floats(table["loss"].to_numpy(), 4)
     error = (~motion.valid).sum(axis=1).astype(int).tolist()  # failed crank angles
     floors, walked = _walked(walks)
+    parts = real_parts(batch, motion, np.flatnonzero(checks.buildable)[:PARTS_CELLS])
     guessed = _predicted(predicted)
     if guessed:
         floors = in_floor_order({*floors, *(floor for _, floor in guessed)})
@@ -152,6 +159,8 @@ def repertoire_view(
             cells[-1]["w"] = [walked.get((cell, floor)) for floor in floors]
         if guessed:
             cells[-1]["p"] = [guessed.get((cell, floor)) for floor in floors]
+        if i in parts:
+            cells[-1]["r"] = parts[i]
     return {
         "run_id": trial.run_id,
         "trial_key": trial.trial_key,
@@ -166,6 +175,41 @@ def repertoire_view(
         "walk_model": model_run if guessed else None,
         "cells": cells,
     }
+
+
+def real_parts(batch: LinkageBatch, motion: Motion, rows: np.ndarray) -> dict[int, dict]:
+    """Returns, for the rows (indices into the batch, whose motion at the trial's angles is
+    `motion`) that turn, their real parts as the
+    page's r: {"p": [[part number, name, count], ...] for one leg, "j": 1 when a bar is
+    built of joined beams} or {"x": why no real parts build it}. The build is the batch
+    build (`sim.robot.builds`: the rounding `linkevo pull` finds for 94-99.5 % of cells),
+    its layer plan and parts (`sim.robot.parts`)."""
+    from linkevo.sim.robot.builds import lego_builds
+    from linkevo.sim.robot.layers import LayerError, layer_plan
+    from linkevo.sim.robot.parts import PartsError, assign_parts, catalogue
+
+    if not len(rows):
+        return {}
+    here = take_rows(motion, rows) if motion.positions.shape[2] == DEFAULT_ANGLES else None
+    built, rounded = lego_builds(take_rows(batch, rows), here)
+    here = simulate(built, DEFAULT_ANGLES)
+    cat = catalogue()
+    out: dict[int, dict] = {}
+    for j, row in enumerate(rows.tolist()):
+        if not rounded[j] or not here.valid[j].all():
+            out[row] = {"x": "no whole-module rounding of it turns"}
+            continue
+        try:
+            plan = layer_plan(built, here, j)
+            parts = assign_parts(built, here, plan, j)
+        except (LayerError, PartsError) as exc:
+            out[row] = {"x": str(exc)}
+            continue
+        counts = parts.counts(0)
+        out[row] = {"p": [[n, cat.part(n).name, counts[n]] for n in sorted(counts)]}
+        if parts.locks or (plan.width > 1).any():
+            out[row]["j"] = 1
+    return out
 
 
 def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str], list]]:

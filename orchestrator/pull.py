@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import collections
 import csv
 import io
 import json
@@ -15,7 +14,8 @@ import pandas as pd
 
 from linkevo.sim.linkage.linkage_doc import from_document, json_floats, to_document
 from linkevo.sim.linkage.physical import TOGGLE_DEG
-from linkevo.sim.robot.hexapod import in_floor_order
+from linkevo.sim.robot.hexapod import UNIT_M, in_floor_order
+from linkevo.sim.robot.leg import LegError, leg_from_genome
 from linkevo.sim.robot.walk_rows import (
     FLOOR_FIELDS,
     FLOOR_ORDER,
@@ -43,6 +43,7 @@ SHEET_COLUMNS = (
     "holes",
     "error_mm",
     "layer",
+    "part",
 )
 
 
@@ -52,22 +53,27 @@ def own_modules(lengths) -> list[int]:
 
 
 def build_sheet(
-    document: dict, modules: list[int] | None = None, layers: list[int] | None = None
+    document: dict,
+    modules: list[int] | None = None,
+    layers: list[int] | None = None,
+    parts: list[str] | None = None,
 ) -> list[dict]:
-    """Returns one row per beam: its length, the LEGO beam that builds it and the error.
+    """Returns one row per beam: its length, its whole-module length, the error, its layer
+    and the real part that builds it.
 
-    A straight Technic beam with h holes spans h - 1 modules between its end holes, so a
-    link of M modules is built from a beam with M + 1 holes. `modules` are the LEGO
-    build's lengths (`sim.robot.lego.quantise`, one per beam); without them each beam is
-    rounded on its own (at least 1 module). `layers` are the beams' layers (`sim.robot.layers`),
-    0 next to the frame; blank without them.
+    A link of M modules lies on two holes M apart, so it needs a beam of at least M + 1
+    holes. `modules` are the LEGO build's lengths (`sim.robot.lego.quantise`, one per
+    beam); without them each beam is rounded on its own (at least 1 module). `layers` are
+    the beams' layers (`sim.robot.layers`), 0 next to the frame, and `parts` the real
+    parts their bars are built from (`beam_parts`); blank without them.
     """
     unit_mm = float(document["units"]["unit_mm"])
     if modules is None:
         modules = own_modules(beam["length"] for beam in document["beams"])
     layers = layers if layers is not None else [""] * len(modules)
+    parts = parts if parts is not None else [""] * len(modules)
     rows = []
-    for beam, whole, layer in zip(document["beams"], modules, layers, strict=True):
+    for beam, whole, layer, part in zip(document["beams"], modules, layers, parts, strict=True):
         rows.append(
             {
                 "beam": beam["id"],
@@ -80,9 +86,25 @@ def build_sheet(
                 "holes": int(whole) + 1,
                 "error_mm": round((whole - beam["length"]) * unit_mm, 1),
                 "layer": layer,
+                "part": part,
             }
         )
     return rows
+
+
+def beam_parts(lego: dict, n_beams: int) -> list[str]:
+    """Returns each linkage beam's real part: the part of every piece of its bar ("32525
+    Technic Beam 11", pieces of a joined bar joined by " + "); blank where there is no
+    build."""
+    if "pieces" not in lego:
+        return [""] * n_beams
+    out = []
+    for b in range(n_beams):
+        bar = lego["bars"][b]
+        out.append(
+            " + ".join(f"{p['part']} {p['name']}" for p in lego["pieces"] if p["bar"] == bar)
+        )
+    return out
 
 
 def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
@@ -126,19 +148,17 @@ def sheet_markdown(source: SourceLinkage, doc: dict, rows: list[dict]) -> str:
         "|" + "---|" * len(SHEET_COLUMNS),
     ]
     lines += ["| " + " | ".join(str(row[c]) for c in SHEET_COLUMNS) + " |" for row in rows]
-    if "layers" in doc["lego"]:
-        lines += ["", *assembly_lines(doc, rows)]
+    if "pieces" in doc["lego"]:
+        lines += ["", *assembly_lines(doc)]
         lines += [
             "",
             "Drawings: linkage.png (numbered as this sheet), layers.png (the beams of each "
             "layer), template.pdf (the build at 1:1 on A4 pages: print at actual size and "
-            "lay the beams on it), path_overlay.png (the foot path as evolved and as built).",
+            "lay the beams on it), path_overlay.png (the foot path as evolved and as built); "
+            "leg.ldr (the leg in LDraw, a step per layer) and robot.mpd (the six legs as "
+            "mounted), for LDView, LeoCAD, LDCad or BrickLink Studio; parts.csv and parts.xml "
+            "(a BrickLink wanted list of the six legs' parts).",
         ]
-    lines += [
-        "",
-        "Extension beams continue their parent beam rigidly: build the two as one straight "
-        "beam or lock them with a second pin.",
-    ]
     return "\n".join(lines) + "\n"
 
 
@@ -156,38 +176,35 @@ def checks_line(checks: dict) -> str:
     )
 
 
-def assembly_lines(doc: dict, rows: list[dict]) -> list[str]:
-    """Returns the pins, the motor axle and the parts list of a LEGO build (Markdown).
+def assembly_lines(doc: dict) -> list[str]:
+    """Returns the joints and the parts list of a LEGO build of real parts (Markdown).
 
-    Layer -1 is the frame (the motor and the static nodes' holes); a pin at a joint spans
-    the layers of the beams that meet there (and the frame at a frame node).
+    Layer -1 is the motor's driver (just inside the crank when the crank is further out);
+    a frame node's axle comes from the frame's hole; a moving joint's pin or axle spans the
+    layers of the beams that meet there, fillers on the layers between.
     """
-    layer = {row["beam"]: int(row["layer"]) for row in rows}
-    kinds = {n["id"]: n["kind"] for n in doc["nodes"]}
-    lines = [f"Layers: {doc['lego']['n_layers']} (0 next to the frame). Pins and axle:", ""]
-    pins = collections.Counter()
-    for node in sorted({e for b in doc["beams"] for e in (b["start"], b["end"])}):
-        beams = [b["id"] for b in doc["beams"] if node in (b["start"], b["end"])]
-        spans = {layer[b] for b in beams} | ({-1} if kinds[node] in ("motor", "static") else set())
-        if len(spans) < 2:
-            continue  # one straight beam passes through: no pin
-        low, high = min(spans), max(spans)
-        part = "motor axle" if kinds[node] == "motor" else f"{high - low + 1}L pin"
-        where = "frame" if low == -1 else f"layer {low}"
-        beam_list = ", ".join(f"b{b}" for b in beams)
+    lego = doc["lego"]
+    lines = [
+        f"Layers: {lego['n_layers']} (0 next to the frame). Joints, by node:",
+        "",
+    ]
+    for joint in lego["joints"]:
+        low, high = joint["layers"][0], joint["layers"][-1]
+        where = "from the frame" if joint["frame"] else f"layer {low}"
+        fillers = f"; fillers: {', '.join(joint['fillers'])}" if joint["fillers"] else ""
         lines.append(
-            f"- node {node} ({kinds[node]}): {part}, {where} to layer {high} ({beam_list})"
+            f"- node {joint['node']}: {joint['fastener']}, {where} to layer {high}{fillers}"
         )
-        pins[part] += 1
-    holes = collections.Counter(row["holes"] for row in rows)
+    lines += ["", "| part | name | per leg | six legs, mounted |", "|---|---|---|---|"]
+    lines += [
+        f"| {row['part']} | {row['name']} | {row['per_leg']} | {row['robot']} |"
+        for row in lego["parts_list"]
+    ]
     lines += [
         "",
-        "Parts: "
-        + ", ".join(
-            [f"{n} x {h}-hole beam" for h, n in sorted(holes.items())]
-            + [f"{n} x {part}" for part, n in sorted(pins.items())]
-        )
-        + ".",
+        f"Parts from the LDraw library (CC BY 4.0); the motor drives the crank through a "
+        f"{lego['driver']} on its axle, pinned to the crank's second hole; joined beams are "
+        "locked by two friction pins.",
     ]
     return lines
 
@@ -205,18 +222,12 @@ def lego_line(lego: dict) -> str:
     )
 
 
-def leg_facts(genome, mode: str) -> dict[str, dict]:
-    """Returns the leg's shape (`sim.robot.leg.Leg.shape`: size, stroke, lift, crank share)
-    and each slot's spacer layers on the study's robot with this leg in every slot
-    (`sim.robot.mounting.robot_spacers`), as "shape" and "mounting"; {} for a linkage that
-    does not turn."""
-    from linkevo.sim.robot.leg import LegError, leg_from_genome
+def leg_facts(leg) -> dict[str, dict]:
+    """Returns a leg's shape (`sim.robot.leg.Leg.shape`: size, stroke, lift, crank share)
+    and each slot's spacer layers on the study's robot with it in every slot
+    (`sim.robot.mounting.robot_spacers`), as "shape" and "mounting"."""
     from linkevo.sim.robot.mounting import robot_spacers
 
-    try:
-        leg = leg_from_genome(genome, mode)
-    except LegError:
-        return {}
     return {"shape": leg.shape(), "mounting": robot_spacers(leg)}
 
 
@@ -247,21 +258,42 @@ def mounting_line(spacers: dict[str, int]) -> str:
 
 
 def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
-    """Returns the LEGO build of a linkage as JSON-able values, or why there is none."""
-    from linkevo.sim.robot.layers import layer_plan
+    """Returns the LEGO build of a linkage of real parts as JSON-able values, or why there is
+    none (`refused`)."""
+    return lego_and_parts(genome, mode, fitness, n_angles)[0]
+
+
+def lego_and_parts(genome, mode: str, fitness: str, n_angles: int):
+    """Returns (`lego_build`'s values, the real parts, the leg) of a linkage; the last two
+    None where there is no build (`sim.robot.leg.recipe_and_leg`, the build a walk walks)."""
+    from linkevo.orchestrator.parts_list import parts_rows
+    from linkevo.sim.robot.leg import recipe_and_leg
     from linkevo.sim.robot.lego import QuantiseError, quantise
+    from linkevo.sim.robot.mounting import robot_spacers
+    from linkevo.sim.robot.parts import PartsError
 
     fitness = fitness if fitness in STUDY_FITNESSES else STUDY_FITNESSES[0]  # F_w: F_p
     try:
         q = quantise(genome, mode, fitness, n_angles)
-    except QuantiseError as exc:
-        return {"refused": str(exc)}
-    plan = layer_plan(q.batch, q.motion)
+        recipe, leg = recipe_and_leg(genome, mode)
+    except (QuantiseError, LegError) as exc:
+        return {"refused": str(exc)}, None, None
+    if recipe.parts is None:
+        return {"refused": recipe.note.removeprefix("walked as evolved: ")}, None, None
+    parts = recipe.parts
+    try:
+        parts_list = parts_rows(parts, robot_spacers(leg))
+    except PartsError as exc:  # a robot config's spacers past the longest axle
+        return {"refused": f"mounted on the robot's spacers: {exc}"}, None, None
     first = int(np.argmax(q.motion.valid[0]))
-    return {
+
+    def named(part) -> str:
+        return f"{part.name} ({part.number})"
+
+    lego = {
         "lengths": q.lengths.tolist(),
-        "layers": plan.layer.tolist(),
-        "n_layers": plan.n_layers,
+        "layers": recipe.layer.tolist(),
+        "n_layers": int(leg.piece_layer.max()) + 1,
         "roundings": q.roundings,
         "feasible": q.feasible,
         "mean_shift": q.mean_shift,
@@ -273,7 +305,33 @@ def lego_build(genome, mode: str, fitness: str, n_angles: int) -> dict:
         "nodes": json_floats(q.motion.positions[0, :, first]),
         "foot_path": {"x": json_floats(q.foot_x), "y": json_floats(q.foot_y)},
         "original_path": {"x": json_floats(q.original_x), "y": json_floats(q.original_y)},
+        "bars": list(parts.bar_of),
+        "pieces": [
+            {
+                "part": p.part.number,
+                "name": p.part.name,
+                "bar": p.bar,
+                "beam": p.beam,
+                "t0": p.t0,
+                "t1": p.t1,
+                "layer": p.layer,
+            }
+            for p in parts.pieces
+        ],
+        "joints": [
+            {
+                "node": j.node,
+                "layers": list(j.layers),
+                "frame": j.frame,
+                "fastener": named(j.fastener),
+                "fillers": [f"{named(part)} on layer {at:g}" for part, at in j.fillers],
+            }
+            for j in parts.joints
+        ],
+        "driver": named(parts.driver),
+        "parts_list": parts_list,
     }
+    return lego, parts, leg
 
 
 def simulated_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
@@ -453,15 +511,24 @@ def pull(
     # Written afresh from the genome, so an older document comes out complete (topology,
     # crank angles, physical checks).
     doc = to_document(genome, mode, n_angles=n_angles, meta=meta)
-    doc["lego"] = lego_build(genome, mode, source.fitness, n_angles)
-    doc |= leg_facts(genome, mode)
+    doc["lego"], parts, leg = lego_and_parts(genome, mode, source.fitness, n_angles)
+    if leg is None:
+        try:
+            leg = leg_from_genome(genome, mode)  # as evolved
+        except LegError:
+            leg = None  # it does not turn: no shape, no mounting
+    if leg is not None:
+        doc |= leg_facts(leg)
     if walks:
         doc["simulated_walk"] = walks
     if predicted:
         doc["predicted_walk"] = predicted
     if confirmed:
         doc["confirmed_walk"] = confirmed
-    rows = build_sheet(doc, doc["lego"].get("lengths"), doc["lego"].get("layers"))
+    lego = doc["lego"]
+    rows = build_sheet(
+        doc, lego.get("lengths"), lego.get("layers"), beam_parts(lego, len(doc["beams"]))
+    )
     table = io.StringIO()
     writer = csv.DictWriter(table, fieldnames=SHEET_COLUMNS, lineterminator="\n")
     writer.writeheader()
@@ -482,4 +549,34 @@ def pull(
         paths.append(draw_path_overlay(evolved, built, out / "path_overlay.png", title))
         paths.append(draw_layers(doc, out / "layers.png"))
         paths.append(draw_template(doc, out / "template.pdf"))
+    if parts is not None:
+        paths += write_parts(parts, leg, doc, out, f"{source.approach} / {source.fitness}")
     return paths
+
+
+def write_parts(parts, leg, doc: dict, out: Path, what: str) -> list[Path]:
+    """Writes leg.ldr, robot.mpd (`sim.robot.ldraw`), parts.csv and parts.xml
+    (`orchestrator.parts_list`) of a LEGO build of real parts into out; returns them."""
+    from linkevo.orchestrator.parts_list import parts_csv, parts_xml
+    from linkevo.sim.robot.hexapod import TRIPOD_OFFSETS_DEG, Frame
+    from linkevo.sim.robot.ldraw import LDU, leg_ldr, robot_mpd
+
+    frame = Frame()
+    ldu_per_m = LDU / UNIT_M
+    phases = {slot: math.radians(deg) for slot, deg in TRIPOD_OFFSETS_DEG.items()}
+    texts = {
+        "leg.ldr": leg_ldr(parts, leg, f"linkevo leg: {what}"),
+        "robot.mpd": robot_mpd(
+            parts,
+            leg,
+            phases,
+            doc["mounting"],
+            spacing_ldu=frame.leg_spacing * ldu_per_m,
+            side_ldu=(frame.width / 2 + frame.leg_plane) * ldu_per_m,
+        ),
+        "parts.csv": parts_csv(doc["lego"]["parts_list"]),
+        "parts.xml": parts_xml(doc["lego"]["parts_list"]),
+    }
+    for name, text in texts.items():
+        write_text_atomic(out / name, text)
+    return [out / name for name in texts]

@@ -51,7 +51,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from linkevo.sim.robot.hexapod import BEAM_KG_PER_MODULE, LAYER_PITCH_M, UNIT_M, Frame
+from linkevo.sim.robot.hexapod import LAYER_PITCH_M, UNIT_M, Frame
 from linkevo.sim.robot.leg import Leg
 
 if TYPE_CHECKING:
@@ -271,8 +271,7 @@ def foot_load_n(frame: Frame, leg: Leg) -> float:
     """Returns W: the robot's weight (frame and six legs' beams) on the lone foot of a
     tripod: the middle foot, alone on its side, carries half of it (the front and rear feet
     of the other side a quarter each), with the body's weight centred."""
-    lengths = np.linalg.norm(leg.paths[leg.beams[:, 1], 0] - leg.paths[leg.beams[:, 0], 0], axis=1)
-    legs_kg = 6 * BEAM_KG_PER_MODULE * float(lengths.sum())
+    legs_kg = 6 * float(leg.piece_kg.sum())
     return (frame.mass_kg + legs_kg) * G / 2.0
 
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from linkevo.sim.robot.hexapod import BEAM_RADIUS_M, LEG_SLOTS, UNIT_M, Floor, Frame, Motor
+from linkevo.sim.robot.hexapod import BEAM_RADIUS_M, LEG_SLOTS, Floor, Frame, Motor
 from linkevo.sim.robot.leg import Leg
 from linkevo.sim.robot.model import (
     BEAM_RGBA,
@@ -32,7 +32,6 @@ from linkevo.sim.robot.model import (
     RobotModel,
     add_beam,
     add_motor,
-    beam_kg,
     check_slots,
     floor_reach,
     leg_frame,
@@ -159,9 +158,11 @@ class _LegBuilder:
         for node in leg.frame_nodes:
             owner[int(node)] = (frame_body, np.zeros(3), 0)
         self._reach = floor_reach(leg)
+        self._ends = leg.piece_ends(np.array([leg.pose_index(phase)]))[:, 0]  # (P, 2, 2)
         self.lowest = np.inf
-        for b in np.flatnonzero(leg.part == -1):  # beams fixed to the frame
-            self._add_beam(frame_body, np.zeros(3), leg, nodes, b, crank=False)
+        for k in np.flatnonzero(leg.piece_part == -1):  # pieces fixed to the frame
+            self._add_piece(frame_body, np.zeros(3), leg, k, crank=False)
+        for b in np.flatnonzero(leg.part == -1):
             for node in leg.beams[b]:
                 owner.setdefault(int(node), (frame_body, np.zeros(3), int(leg.layer[b])))
         for part in range(leg.n_parts):
@@ -180,9 +181,10 @@ class _LegBuilder:
                 axis=[0, self._facing, 0],  # counter-clockwise in the linkage's frame
                 damping=0.0 if is_crank else PIN_DAMPING,
             )
+            for k in np.flatnonzero(leg.piece_part == part):
+                self._add_piece(child, origin, leg, k, crank=is_crank)
             pinned = {pivot}  # one pin per node of the part: a second would be redundant
             for b in members:
-                self._add_beam(child, origin, leg, nodes, b, crank=is_crank)
                 for node in (int(leg.beams[b, 0]), int(leg.beams[b, 1])):
                     if node in pinned:
                         continue
@@ -200,20 +202,19 @@ class _LegBuilder:
             size=[0.004, 0, 0],
         )
 
-    def _add_beam(self, body, origin, leg: Leg, nodes: np.ndarray, b: int, crank: bool) -> None:
-        """Adds beam b on its layer; it touches the floor only if some crank angle brings
-        it within reach (`floor_reach`)."""
-        layer = int(leg.layer[b])
-        start = self._world(nodes[leg.beams[b, 0]], layer)
-        end = self._world(nodes[leg.beams[b, 1]], layer)
-        length = float(np.linalg.norm(end - start))
+    def _add_piece(self, body, origin, leg: Leg, k: int, crank: bool) -> None:
+        """Adds piece k (`Leg.pieces`) on its layer; it touches the floor only if some crank
+        angle brings it within reach (`floor_reach`)."""
+        layer = int(leg.piece_layer[k])
+        start = self._world(self._ends[k, 0], layer)
+        end = self._world(self._ends[k, 1], layer)
         add_beam(
             body,
             origin,
             start,
             end,
-            mass=beam_kg(length / UNIT_M),
-            contact=LEG_CONTACT if self._reach[b] else NO_CONTACT,
+            mass=float(leg.piece_kg[k]),
+            contact=LEG_CONTACT if self._reach[k] else NO_CONTACT,
             rgba=CRANK_RGBA if crank else BEAM_RGBA,
         )
         self.lowest = min(self.lowest, start[2], end[2])

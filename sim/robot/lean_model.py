@@ -43,7 +43,6 @@ from linkevo.sim.robot.model import (
     RobotModel,
     add_beam,
     add_motor,
-    beam_kg,
     check_slots,
     floor_reach,
     leg_frame,
@@ -260,12 +259,10 @@ def build_lean_robot(
     motor = motor or Motor()
     check_slots(legs, phases)
     spacers = spacers or dict.fromkeys(LEG_SLOTS, 0)
-    reach = {s: floor_reach(legs[s]) for s in LEG_SLOTS}
-    coupled = {s: [int(p) for p in np.unique(legs[s].part[reach[s]])] for s in LEG_SLOTS}
+    reach = {s: floor_reach(legs[s]) for s in LEG_SLOTS}  # per piece
+    coupled = {s: [int(p) for p in np.unique(legs[s].piece_part[reach[s]])] for s in LEG_SLOTS}
     carried = sum(
-        _beam_kg(legs[s], b)
-        for s in LEG_SLOTS
-        for b in np.flatnonzero(~np.isin(legs[s].part, coupled[s]))
+        float(legs[s].piece_kg[~np.isin(legs[s].piece_part, coupled[s])].sum()) for s in LEG_SLOTS
     )
     spec, body = robot_spec(floor, frame, timestep, extra_kg=carried)
     rows: list[_Row] = []
@@ -273,8 +270,9 @@ def build_lean_robot(
     lowest = -frame.height / 2
     for i, slot in enumerate(LEG_SLOTS):
         leg, world = legs[slot], leg_frame(slot, legs[slot], frame, spacers[slot])
-        pose = _pose_index(leg, phases[slot])
+        pose = leg.pose_index(phases[slot])
         nodes = leg.paths[:, pose]
+        ends = leg.piece_ends(np.array([pose]))[:, 0]  # (P, 2, 2)
         axle = world(nodes[0], 0)
         crank = body.add_body(name=f"{slot}/crank", pos=axle.tolist())
         crank.add_joint(
@@ -299,10 +297,12 @@ def build_lean_robot(
                 target = body.add_body(name=f"{slot}/part{part}", pos=origin.tolist())
                 rows += _couple(spec, target, slot, i, leg, part, pivot, pose)
             sites[part] = (target, origin)
-            for b in members[reach[slot][members]]:
-                lowest = min(lowest, _add_beam(target, origin, world, leg, nodes, int(b)))
+            for k in np.flatnonzero((leg.piece_part == part) & reach[slot]):
+                lowest = min(lowest, _add_piece(target, origin, world, leg, ends, int(k)))
         foot_beam = next(
-            b for b in range(len(leg.beams)) if leg.foot in leg.beams[b] and reach[slot][b]
+            b
+            for b in range(len(leg.beams))
+            if leg.foot in leg.beams[b] and int(leg.part[b]) in coupled[slot]
         )
         owner, origin = sites[int(leg.part[foot_beam])]
         foot_layers[slot] = int(leg.layer[foot_beam])
@@ -325,7 +325,7 @@ def build_lean_robot(
         tables=np.stack([r.table for r in rows]) if rows else np.zeros((0, 1, 5)),
         wind=np.array([r.wind for r in rows]),
         start=np.array([r.start for r in rows]),
-        start_pose=np.array([_pose_index(legs[s], phases[s]) for s in LEG_SLOTS]),
+        start_pose=np.array([legs[s].pose_index(phases[s]) for s in LEG_SLOTS]),
         scale=np.array([r.scale for r in rows]),
         crank_qpos=np.array([model.jnt_qposadr[j] for j in cranks], dtype=np.int64),
         statics=tuple(statics[id(legs[s])] for s in LEG_SLOTS),
@@ -347,22 +347,14 @@ class _Row:
     scale: float
 
 
-def _pose_index(leg: Leg, phase: float) -> int:
-    n = leg.paths.shape[1]
-    return round(phase / (2 * np.pi) * n) % n
-
-
-def _beam_kg(leg: Leg, b: int) -> float:
-    length = float(np.linalg.norm(leg.paths[leg.beams[b, 0], 0] - leg.paths[leg.beams[b, 1], 0]))
-    return beam_kg(length)
-
-
-def _add_beam(target, origin, world, leg: Leg, nodes: np.ndarray, b: int) -> float:
-    """Adds beam b to a body as a beam that touches the floor; returns its lowest
-    centre-line height in the frame's coordinates."""
-    layer = int(leg.layer[b])
-    start, end = world(nodes[leg.beams[b, 0]], layer), world(nodes[leg.beams[b, 1]], layer)
-    add_beam(target, origin, start, end, mass=_beam_kg(leg, b), contact=LEG_CONTACT, rgba=BEAM_RGBA)
+def _add_piece(target, origin, world, leg: Leg, ends: np.ndarray, k: int) -> float:
+    """Adds piece k (`Leg.pieces`, its ends (P, 2, 2) at the build's pose) to a body as a
+    beam that touches the floor; returns its lowest centre-line height in the frame's
+    coordinates."""
+    layer = int(leg.piece_layer[k])
+    start, end = world(ends[k, 0], layer), world(ends[k, 1], layer)
+    mass = float(leg.piece_kg[k])
+    add_beam(target, origin, start, end, mass=mass, contact=LEG_CONTACT, rgba=BEAM_RGBA)
     return float(min(start[2], end[2]))
 
 

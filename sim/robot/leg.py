@@ -1,6 +1,6 @@
-"""Provides `Leg`: one linkage as the 3-D robot carries it (its LEGO build where one turns,
-else the linkage as evolved), with the node paths over a fine crank turn, the rigid parts
-and the layer of every beam."""
+"""Provides `Leg`: one linkage as the 3-D robot carries it (its LEGO build of real Technic
+parts where one exists, else the linkage as evolved), with the node paths over a fine crank
+turn, the rigid parts, the layer of every beam and the physical beams it is built from."""
 
 from __future__ import annotations
 
@@ -12,9 +12,10 @@ import numpy as np
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.decoding import NODE_KINDS, LinkageBatch, decode
 from linkevo.sim.linkage.kinematics import simulate
-from linkevo.sim.robot.hexapod import UNIT_M
-from linkevo.sim.robot.layers import layer_plan
+from linkevo.sim.robot.hexapod import BEAM_KG_PER_MODULE, MAX_SPACERS, UNIT_M
+from linkevo.sim.robot.layers import LayerError, layer_plan
 from linkevo.sim.robot.lego import QuantiseError, whole_module_build
+from linkevo.sim.robot.parts import PartsBuild, PartsError, assign_parts
 from linkevo.sim.study import DEFAULT_ANGLES
 
 POSE_ANGLES = 360
@@ -39,9 +40,20 @@ class Leg:
         layer: (B,) int64 each beam's layer, 0 nearest the frame.
         frame_nodes: (F,) int64 nodes fixed to the frame, the motor (node 0) first.
         foot: the foot node (lowest over the turn).
-        built: True for the LEGO build (whole-module beams), False for the linkage as
-            evolved (no whole-module rounding of it turns).
+        built: True for the LEGO build (whole-module beams of real parts), False for the
+            linkage as evolved (no whole-module rounding of it turns, or no real parts
+            build it).
         note: why the leg is as evolved, or "" for a LEGO build.
+        pieces: (P,) int64 the physical beams' linkage beams: each lies along one (its
+            bar's first beam) and moves with that beam's part (`sim.robot.parts.Piece`);
+            as evolved, one per beam.
+        piece_span: (P, 2) float64 each piece's end holes, modules along its beam from the
+            beam's start node.
+        piece_layer: (P,) int64 each piece's layer.
+        piece_kg: (P,) float64 each piece's mass.
+        most_spacers: the most spacer layers it can be mounted on (`sim.robot.mounting`):
+            its frame axles, lengthened through them, stay within the longest Technic
+            axle; as evolved, `MAX_SPACERS`.
     """
 
     paths: np.ndarray
@@ -52,17 +64,54 @@ class Leg:
     foot: int
     built: bool
     note: str = ""
+    pieces: np.ndarray | None = None
+    piece_span: np.ndarray | None = None
+    piece_layer: np.ndarray | None = None
+    piece_kg: np.ndarray | None = None
+    most_spacers: int = MAX_SPACERS
+
+    def __post_init__(self) -> None:
+        if self.pieces is None:  # one piece per beam, hole to hole, of its length's mass
+            n = len(self.beams)
+            length = np.linalg.norm(
+                self.paths[self.beams[:, 1], 0] - self.paths[self.beams[:, 0], 0], axis=1
+            )
+            object.__setattr__(self, "pieces", np.arange(n, dtype=np.int64))
+            object.__setattr__(self, "piece_span", np.stack([np.zeros(n), length], axis=1))
+            object.__setattr__(self, "piece_layer", self.layer.astype(np.int64))
+            object.__setattr__(self, "piece_kg", np.maximum(length, 0.5) * BEAM_KG_PER_MODULE)
+
+    def piece_ends(self, poses: np.ndarray | slice = slice(None)) -> np.ndarray:
+        """Returns (P, K, 2, 2) each piece's end holes at the poses (indices into the A
+        angles; all by default), in modules."""
+        start = self.paths[self.beams[self.pieces, 0]][:, poses]  # (P, K, 2)
+        end = self.paths[self.beams[self.pieces, 1]][:, poses]
+        direction = end - start
+        unit = direction / np.maximum(np.linalg.norm(direction, axis=-1, keepdims=True), 1e-12)
+        t = self.piece_span[:, None, :, None]  # (P, 1, 2, 1)
+        return start[:, :, None, :] + t * unit[:, :, None, :]
+
+    @property
+    def piece_part(self) -> np.ndarray:
+        """(P,) each piece's rigid part (its beam's)."""
+        return self.part[self.pieces]
 
     @property
     def n_parts(self) -> int:
         """Moving parts (bodies), the crank included."""
         return int(self.part.max()) + 1
 
+    def pose_index(self, phase):
+        """Returns the index of the pose (of the A sampled crank angles) nearest crank angle
+        `phase` (radians): an int for a number, (T,) int64 for (T,) angles."""
+        n = self.paths.shape[1]
+        index = np.round(np.asarray(phase, dtype=float) / (2 * np.pi) * n).astype(np.int64) % n
+        return int(index) if index.ndim == 0 else index
+
     def pose(self, phase: float) -> np.ndarray:
         """Returns (M, 2) the node positions at crank angle `phase` (radians), rounded to
         the nearest of the A sampled angles."""
-        n = self.paths.shape[1]
-        return self.paths[:, round(phase / (2 * np.pi) * n) % n]
+        return self.paths[:, self.pose_index(phase)]
 
     def foot_path(self) -> np.ndarray:
         """Returns (A, 2) the foot's path over one turn."""
@@ -123,20 +172,27 @@ class LegRecipe:
         layer: (B,) int64 each beam's layer (`sim.robot.layers.layer_plan`).
         note: why the leg is as evolved, or "" for a LEGO build.
         key: the digest of the leg.
+        parts: the LEGO build's real parts (`sim.robot.parts.assign_parts`); None as
+            evolved.
     """
 
     batch: LinkageBatch
     layer: np.ndarray
     note: str
     key: str
+    parts: PartsBuild | None = None
 
     def leg(self) -> Leg:
         """Returns the leg (its poses simulated at `POSE_ANGLES` crank angles)."""
-        return _leg(self.batch, simulate(self.batch, POSE_ANGLES), self.layer, self.note)
+        motion = simulate(self.batch, POSE_ANGLES)
+        return _leg(self.batch, motion, self.layer, self.note, self.parts)
 
 
-def _leg(batch: LinkageBatch, motion, layer: np.ndarray, note: str) -> Leg:
-    """The leg of a one-row linkage, its motion at `POSE_ANGLES` and its beams' layers."""
+def _leg(
+    batch: LinkageBatch, motion, layer: np.ndarray, note: str, parts: PartsBuild | None
+) -> Leg:
+    """The leg of a one-row linkage, its motion at `POSE_ANGLES`, its beams' layers and its
+    real parts (None: one piece per beam)."""
     n_beams = int(batch.n_beams[0])
     beams = batch.beam_int[0, :n_beams, :2].astype(np.int64)
     kinds = [NODE_KINDS[int(k)] for k in batch.node_int[0, :, 0]]
@@ -150,20 +206,34 @@ def _leg(batch: LinkageBatch, motion, layer: np.ndarray, note: str) -> Leg:
         foot=int(motion.foot[0]),
         built=not note,
         note=note,
+        **(_pieces(parts) if parts is not None else {}),
     )
+
+
+def _pieces(parts: PartsBuild) -> dict[str, np.ndarray]:
+    """A build's physical beams as `Leg`'s piece arrays."""
+    pieces = parts.pieces
+    return {
+        "pieces": np.array([p.beam for p in pieces], dtype=np.int64),
+        "piece_span": np.array([(p.t0, p.t1) for p in pieces], dtype=np.float64),
+        "piece_layer": np.array([p.layer for p in pieces], dtype=np.int64),
+        "piece_kg": np.array([p.part.mass_kg for p in pieces], dtype=np.float64),
+        "most_spacers": min(MAX_SPACERS, parts.most_spacers),
+    }
 
 
 def _digest(leg: Leg) -> str:
     """A digest of everything a walk reads of a leg."""
-    digest = hashlib.sha1(f"{leg.foot} {leg.built}".encode())
-    for array in (leg.paths, leg.beams, leg.part, leg.layer, leg.frame_nodes):
+    digest = hashlib.sha1(f"{leg.foot} {leg.built} {leg.most_spacers}".encode())
+    arrays = (leg.paths, leg.beams, leg.part, leg.layer, leg.frame_nodes, leg.pieces)
+    for array in (*arrays, leg.piece_span, leg.piece_layer, leg.piece_kg):
         digest.update(np.ascontiguousarray(array).tobytes())
     return digest.hexdigest()
 
 
 def leg_from_genome(genome: np.ndarray, mode: str = "paper") -> Leg:
     """Returns the leg of a genome: its LEGO build (as `linkevo pull` makes it) where a
-    whole-module rounding turns, else the linkage as evolved.
+    whole-module rounding turns and real parts build it, else the linkage as evolved.
 
     Args:
         genome: (56,) genes.
@@ -183,11 +253,14 @@ def leg_recipe(genome: np.ndarray, mode: str = "paper") -> LegRecipe:
 def recipe_and_leg(genome: np.ndarray, mode: str = "paper") -> tuple[LegRecipe, Leg]:
     """Returns `leg_recipe`'s recipe and `leg_from_genome`'s leg at once; raises as they do."""
     genome = np.asarray(genome, dtype=np.float64).reshape(1, -1)
-    note = ""
+    note, parts = "", None
     try:
         batch = whole_module_build(genome[0], mode)
-    except QuantiseError as exc:
-        batch, note = decode(genome, mode), f"walked as evolved: {exc}"
+        coarse = simulate(batch, DEFAULT_ANGLES)
+        plan = layer_plan(batch, coarse)
+        parts = assign_parts(batch, coarse, plan)
+    except (QuantiseError, LayerError, PartsError) as exc:
+        batch, note, plan = decode(genome, mode), f"walked as evolved: {exc}", None
     motion = simulate(batch, POSE_ANGLES)
     valid = motion.valid[0]
     if not valid.all():
@@ -195,9 +268,10 @@ def recipe_and_leg(genome: np.ndarray, mode: str = "paper") -> tuple[LegRecipe, 
             f"the linkage does not turn a full turn: it fails to assemble at "
             f"{int((~valid).sum())} of {POSE_ANGLES} crank angles, so no robot can walk on it"
         )
-    layer = layer_plan(batch, simulate(batch, DEFAULT_ANGLES)).layer
-    leg = _leg(batch, motion, layer, note)
-    return LegRecipe(batch=batch, layer=layer, note=note, key=_digest(leg)), leg
+    if plan is None:  # as evolved: no parts, so no fasteners to keep clear
+        plan = layer_plan(batch, simulate(batch, DEFAULT_ANGLES), fastened=False)
+    leg = _leg(batch, motion, plan.layer, note, parts)
+    return LegRecipe(batch, plan.layer, note, _digest(leg), parts), leg
 
 
 def rigid_parts(node_int: np.ndarray, beams: np.ndarray, frame_nodes: list[int]) -> np.ndarray:

@@ -18,7 +18,6 @@ import mujoco
 import numpy as np
 
 from linkevo.sim.robot.hexapod import (
-    BEAM_KG_PER_MODULE,
     BEAM_RADIUS_M,
     LAYER_PITCH_M,
     LEG_SLOTS,
@@ -148,9 +147,9 @@ def control_tick(robot: RobotModel, data: mujoco.MjData, goal: np.ndarray, steps
 
 
 def floor_reach(leg: Leg) -> np.ndarray:
-    """(B,) bool: the beams that come within CONTACT_REACH of the leg's lowest point."""
-    heights = leg.paths[leg.beams, :, 1]  # (B, 2, A)
-    low = heights.min(axis=(1, 2))
+    """(P,) bool: the leg's pieces (`Leg.pieces`) that come within CONTACT_REACH of its
+    lowest point."""
+    low = leg.piece_ends()[..., 1].min(axis=(1, 2))  # (P,)
     return low <= low.min() + CONTACT_REACH
 
 
@@ -220,12 +219,6 @@ def leg_frame(slot: str, leg: Leg, frame: Frame, spacer: int = 0):
         return out
 
     return world
-
-
-def beam_kg(length_modules: float) -> float:
-    """Returns a Technic beam's mass (kg) for its length in modules (half a module at least:
-    a beam whose ends meet is a pin's worth of plastic)."""
-    return max(length_modules, 0.5) * BEAM_KG_PER_MODULE
 
 
 def add_beam(

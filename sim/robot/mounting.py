@@ -5,7 +5,8 @@ and the check that neighbouring legs strike each other as they turn (`Mounting.s
 The three legs of a side turn in one plane, `Frame.leg_spacing` apart along the body; a leg
 wider than the spacing sweeps into its neighbour's. A builder mounts such neighbours apart:
 one of them sits further out on spacers (bushes on the motor's axle, a layer each), so that
-no beam of one shares a layer with a beam of the other that it comes near over the turn.
+no beam of one shares a layer with a beam of the other that it comes near over the turn (each
+beam as built, `sim.robot.leg.Leg.pieces`).
 Each spacer layer moves the leg's load further along the axle (`sim.robot.frailty`, the
 axle's moment).
 
@@ -25,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from linkevo.sim.robot.hexapod import BEAM_RADIUS_M, LEG_SLOTS, UNIT_M, Frame, Robot
+from linkevo.sim.robot.layers import segment_distance
 from linkevo.sim.robot.leg import Leg
 
 SIDES: tuple[str, str] = ("left", "right")
@@ -58,7 +60,7 @@ class Mounting:
     def layers(self, slot: str) -> set[int]:
         """The layers the slot's leg occupies, counted from the frame, spacers included."""
         leg = self.legs[slot]
-        return set((leg.layer + self.spacers[slot]).tolist())
+        return set((leg.piece_layer + self.spacers[slot]).tolist())
 
     def strikes(self, phases: np.ndarray) -> list[tuple[str, str, int]]:
         """Returns the neighbouring legs that touch: (slot, slot, the first instant), for
@@ -72,8 +74,8 @@ class Mounting:
         for a, b in pairs():
             if not self.layers(a) & self.layers(b):
                 continue
-            poses = [pose_index(self.legs[s], phases[:, LEG_SLOTS.index(s)]) for s in (a, b)]
-            la, lb = (self.legs[s].layer + self.spacers[s] for s in (a, b))
+            poses = [self.legs[s].pose_index(phases[:, LEG_SLOTS.index(s)]) for s in (a, b)]
+            la, lb = (self.legs[s].piece_layer + self.spacers[s] for s in (a, b))
             touch = near((self.legs[a], self.legs[b]), (a, b), poses, self.spacing)
             touch &= la[None, :, None] == lb[None, None, :]
             hits = touch.any(axis=(1, 2))
@@ -107,12 +109,6 @@ def pairs() -> list[tuple[str, str]]:
     return out
 
 
-def pose_index(leg: Leg, phases: np.ndarray) -> np.ndarray:
-    """Returns (T,) the leg's pose index (into `Leg.paths`) nearest each crank angle (T,)."""
-    n = leg.paths.shape[1]
-    return np.round(np.asarray(phases) / (2 * math.pi) * n).astype(np.int64) % n
-
-
 def near(
     legs: tuple[Leg, Leg],
     slots: tuple[str, str],
@@ -130,7 +126,8 @@ def near(
     """
     a = _segments(legs[0], slots[0], poses[0], spacing)  # (K, Ba, 2, 2)
     b = _segments(legs[1], slots[1], poses[1], spacing)
-    return _closest(a[:, :, None], b[:, None, :]) < within
+    a, b = a[:, :, None], b[:, None, :]
+    return segment_distance(a[..., 0, :], a[..., 1, :], b[..., 0, :], b[..., 1, :]) < within
 
 
 def auto_spacers(
@@ -139,7 +136,8 @@ def auto_spacers(
     """Returns each slot's spacer layers as a builder would choose them: for each leg of a
     side, front to rear, the fewest that keep every beam that comes near a beam of an
     earlier leg over a turn (at their phases, within `CLEARANCE_MODULES`) off that beam's
-    layer. Legs whose sweeps never meet get none.
+    layer, up to the leg's `most_spacers` (past them the legs strike: `Mounting.strikes`).
+    Legs whose sweeps never meet get none.
 
     Args:
         legs: the leg in each slot; phases: each slot's phase offset (radians).
@@ -153,12 +151,15 @@ def auto_spacers(
         for k, slot in enumerate(slots):
             meeting = []  # (earlier leg's beam layers, this leg's, the pairs that meet)
             for e in slots[:k]:
-                poses = [pose_index(legs[s], turn + phases[s]) for s in (e, slot)]
+                poses = [legs[s].pose_index(turn + phases[s]) for s in (e, slot)]
                 close = near((legs[e], legs[slot]), (e, slot), poses, spacing, CLEARANCE_MODULES)
                 if close.any():
-                    meeting.append((legs[e].layer + out[e], legs[slot].layer, close.any(axis=0)))
+                    layers = (legs[e].piece_layer + out[e], legs[slot].piece_layer)
+                    meeting.append((*layers, close.any(axis=0)))
             spacer = 0
-            while any((m & (a[:, None] == b[None, :] + spacer)).any() for a, b, m in meeting):
+            while spacer < legs[slot].most_spacers and any(
+                (m & (a[:, None] == b[None, :] + spacer)).any() for a, b, m in meeting
+            ):
                 spacer += 1
             out[slot] = spacer
     return out
@@ -185,32 +186,10 @@ def spacers_text(spacers: dict[str, int]) -> str:
 
 
 def _segments(leg: Leg, slot: str, poses: np.ndarray, spacing: float) -> np.ndarray:
-    """Returns (K, B, 2, 2) each beam's ends at K pose indices in the side's plane (x along
-    the body, y up; modules), the leg's axle placed by its slot and facing as mounted."""
+    """Returns (K, P, 2, 2) each piece's end holes (`Leg.pieces`) at K pose indices in the
+    side's plane (x along the body, y up; modules), the leg's axle placed by its slot and
+    facing as mounted."""
     axle = ALONG[slot.split("-")[1]] * spacing
-    nodes = leg.paths[:, poses]  # (M, K, 2)
-    plane = np.stack([axle - leg.facing() * nodes[..., 0], nodes[..., 1]], axis=-1)
-    return np.stack([plane[leg.beams[:, 0]], plane[leg.beams[:, 1]]], axis=2).transpose(1, 0, 2, 3)
-
-
-def _closest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Returns the least distance between segments a and b ((..., 2, 2) each, broadcast
-    against each other): zero where they cross, else the least distance from an end of one
-    to the other."""
-
-    def to_segment(p: np.ndarray, s: np.ndarray) -> np.ndarray:
-        d = s[..., 1, :] - s[..., 0, :]
-        t = np.einsum("...i,...i->...", p - s[..., 0, :], d)
-        t = np.clip(t / np.maximum(np.einsum("...i,...i->...", d, d), 1e-12), 0.0, 1.0)
-        return np.linalg.norm(p - s[..., 0, :] - t[..., None] * d, axis=-1)
-
-    def turn(o: np.ndarray, e: np.ndarray, p: np.ndarray) -> np.ndarray:
-        cross = (e[..., 0] - o[..., 0]) * (p[..., 1] - o[..., 1])
-        return np.sign(cross - (e[..., 1] - o[..., 1]) * (p[..., 0] - o[..., 0]))
-
-    a0, a1, b0, b1 = a[..., 0, :], a[..., 1, :], b[..., 0, :], b[..., 1, :]
-    cross = (turn(a0, a1, b0) * turn(a0, a1, b1) < 0) & (turn(b0, b1, a0) * turn(b0, b1, a1) < 0)
-    ends = np.min(
-        [to_segment(a0, b), to_segment(a1, b), to_segment(b0, a), to_segment(b1, a)], axis=0
-    )
-    return np.where(cross, 0.0, ends)
+    ends = leg.piece_ends(poses)  # (P, K, 2, 2)
+    plane = np.stack([axle - leg.facing() * ends[..., 0], ends[..., 1]], axis=-1)
+    return plane.transpose(1, 0, 2, 3)

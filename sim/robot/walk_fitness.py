@@ -16,8 +16,8 @@ overlap (a sound walk's loss is under 1000: no robot walks 10 m in 10 s):
 - walked, no break: -distance;
 - walked, broke (or diverged): `BROKEN_LOSS` - the distance walked until it stopped (0 if
   it diverged);
-- no LEGO build turns, the build does not turn a full turn, or the build failed:
-  `NO_LEG_LOSS`;
+- no LEGO build turns, no real parts build it, the build does not turn a full turn, or
+  the build failed: `NO_LEG_LOSS`;
 - fails the 2-D checks (never built): `REJECTED_LOSS` + failed crank angles + toggle
   passages + 1 if a beam stretches.
 

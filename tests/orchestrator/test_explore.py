@@ -212,6 +212,18 @@ def test_page_in_chromium_hover_click_pin_filter_and_fold(store, tmp_path, brows
     point_at(browser, moved["c"])  # the folded map still finds each cell
     assert f"cell {moved['c']}: loss {moved['l']:.4f}" in _text(browser, "hover-info")
 
+    # A cell's real parts, or why none build it.
+    named = [c for c in view["cells"] if "r" in c]
+    assert [c["c"] for c in named] == [c["c"] for c in view["cells"] if c["k"][1]][:200]
+    for cell in named[:3]:
+        point_at(browser, cell["c"], click=True)
+        said = _text(browser, "selected-info")
+        if "x" in cell["r"]:
+            assert f"Real parts: none build it ({cell['r']['x']})" in said
+        else:
+            number, name, count = cell["r"]["p"][0]
+            assert "Real parts, one leg" in said and f"{count} × {name} ({number})" in said
+
 
 def test_grid_page_in_chromium_picks_a_trial(store, tmp_path, browser):
     from selenium.webdriver.common.by import By

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
+import re
+from pathlib import Path
+from xml.dom import minidom
 
 import numpy as np
 import pytest
@@ -16,6 +19,7 @@ from linkevo.sim.linkage.linkage_doc import FORMAT, to_document
 from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.leg import leg_from_genome
 from linkevo.sim.robot.mounting import robot_spacers
+from linkevo.sim.robot.parts import catalogue
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.tracking import ensure_experiment
 
@@ -34,6 +38,8 @@ def store(tmp_path_factory):
     genomes = sim.random_genomes(np.random.default_rng(8), 300)
     ev = sim.evaluate(genomes)
     valid = np.flatnonzero(ev.error == 0)[:6]
+    study = json.loads((Path(__file__).parents[1] / "data" / "study_cells.json").read_text())
+    genomes[valid[0]] = study[0]["genome"]  # a study cell real parts build: the first best
     runs = []
     for rank, (approach, fitness, loss) in enumerate(
         (("MAP-LIS", "Fp", 40.0), ("MAP-LIS", "Fp", 25.0), ("EA", "Fsl", -30.0))
@@ -62,6 +68,48 @@ def store(tmp_path_factory):
     return uri, runs, genomes, valid
 
 
+WANTED_TAGS = {
+    "ITEMTYPE",
+    "ITEMID",
+    "COLOR",
+    "MAXPRICE",
+    "MINQTY",
+    "QTYFILLED",
+    "CONDITION",
+    "REMARKS",
+    "NOTIFY",
+    "WANTEDSHOW",
+    "WANTEDLISTID",
+}
+
+
+def bricklink_wanted_list(text: str) -> dict[str, int]:
+    """Returns {item id: quantity} of a BrickLink wanted list, checked against BrickLink's
+    published rules for its XML (bricklink.com help pages 198 and 2567, "Importing items on
+    BrickLink with XML"): no XML declaration; one INVENTORY element holding one or more ITEM
+    elements; each ITEM with its ITEMTYPE (S, P, M, B or G) and ITEMID, a colour ID (0
+    unless a part or gear), a whole quantity above 0, and only the wanted list's elements."""
+    assert not text.lstrip().startswith("<?xml")
+    root = minidom.parseString(text).documentElement
+    assert root.tagName == "INVENTORY"
+    items = [n for n in root.childNodes if n.nodeType == n.ELEMENT_NODE]
+    assert items and all(item.tagName == "ITEM" for item in items)
+    out = {}
+    for item in items:
+        fields = {
+            n.tagName: n.firstChild.data for n in item.childNodes if n.nodeType == n.ELEMENT_NODE
+        }
+        assert set(fields) <= WANTED_TAGS and {"ITEMTYPE", "ITEMID"} <= set(fields)
+        assert fields["ITEMTYPE"] in {"S", "P", "M", "B", "G"} and fields["ITEMID"].strip()
+        colour = int(fields.get("COLOR", "0"))
+        assert colour >= 0 and (colour == 0 or fields["ITEMTYPE"] in {"P", "G"})
+        assert fields["MINQTY"].isdigit() and int(fields["MINQTY"]) > 0
+        assert fields["ITEMTYPE"] == "P" and colour in (11, 86)  # linkevo's: parts in two greys
+        assert fields["ITEMID"] not in out  # one row per part (each in one colour)
+        out[fields["ITEMID"]] = int(fields["MINQTY"])
+    return out
+
+
 def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
     uri, runs, genomes, valid = store
     out = tmp_path / "best"
@@ -77,6 +125,10 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
             "path_overlay.png",
             "layers.png",
             "template.pdf",
+            "leg.ldr",
+            "robot.mpd",
+            "parts.csv",
+            "parts.xml",
         ]
     )
     rows = list(csv.DictReader((out / "build_sheet.csv").open()))
@@ -87,11 +139,20 @@ def test_pull_writes_document_drawings_and_sheet(store, tmp_path, capsys):
         assert int(row["holes"]) == whole + 1  # the LEGO build's lengths, re-simulated
         assert abs(whole - beam["length"]) < 1 or whole == 1
         assert abs(float(row["error_mm"])) < 8.0
+        beams = [catalogue().part(part.split()[0]) for part in row["part"].split(" + ")]
+        assert sum(b.size for b in beams) >= whole + 1  # real beams long enough
     assert [int(r["layer"]) for r in rows] == lego["layers"]
-    assert max(lego["layers"]) + 1 == lego["n_layers"]
+    assert max(p["layer"] for p in lego["pieces"]) + 1 == lego["n_layers"]
     sheet = (out / "build_sheet.md").read_text()
-    assert f"Layers: {lego['n_layers']}" in sheet and "motor axle, frame to layer" in sheet
-    assert "Parts: " in sheet and "-hole beam" in sheet
+    assert f"Layers: {lego['n_layers']}" in sheet and "- node 0: Technic Axle" in sheet
+    # The parts a shop reads: the sheet's table, parts.csv and BrickLink's XML agree.
+    table = re.findall(r"^\| (\w+) \| [^|]+ \| (\d+) \| (\d+) \|$", sheet, flags=re.M)
+    listed = {part: int(robot) for part, _, robot in table}
+    assert listed == {
+        r["part"]: int(r["robot"]) for r in csv.DictReader((out / "parts.csv").open())
+    }
+    ordered = bricklink_wanted_list((out / "parts.xml").read_text())
+    assert ordered == {catalogue().part(p).bricklink: n for p, n in listed.items()}
     assert "MAP-LIS / Fp" in (out / "build_sheet.md").read_text()
     assert f"pulling run {runs[0]} (MAP-LIS, Fp), its best linkage" in capsys.readouterr().err
     pulled = json.loads((out / "linkage.json").read_text())

@@ -37,8 +37,9 @@ def store(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def lis_map(store, ray_local, tmp_path_factory) -> tuple[pd.DataFrame, str]:
-    """MAP-LIS's walk map of its best 4 cells, made by the command: (its rows, what the
-    command printed). The tests that read or extend a walk map start from it."""
+    """MAP-LIS's walk map of its best 8 cells (a few of them build with real parts), made by
+    the command: (its rows, what the command printed). The tests that read or extend a walk
+    map start from it."""
     import contextlib
     import io
 
@@ -50,7 +51,7 @@ def lis_map(store, ray_local, tmp_path_factory) -> tuple[pd.DataFrame, str]:
                 "walkmap",
                 runs["MAP-LIS"],
                 "--cells",
-                "best:4",
+                "best:8",
                 "--seconds",
                 SECONDS,
                 "--tracking-uri",
@@ -102,9 +103,9 @@ def test_walkmap_walks_the_chosen_cells_on_both_floors_and_logs_the_map(store, l
     store = RunStore(uri)
     trial = store.repertoire_trial(run_id)
     table = store.repertoire(run_id, tmp_path / "rep")
-    expected = Selection.parse("best:4").choose(table, trial.mode)["cell"].tolist()
+    expected = Selection.parse("best:8").choose(table, trial.mode)["cell"].tolist()
     assert sorted(frame["cell"].unique()) == sorted(expected)
-    assert len(frame) == 8 and set(frame["floor"]) == {"flat", "carpet"}
+    assert len(frame) == 16 and set(frame["floor"]) == {"flat", "carpet"}
     assert {"bin_0", "bin_1", "mean_distance_cm", "breaks", "reason"} <= set(frame.columns)
     walked = frame[frame["status"] == "walked"]
     assert len(walked) >= 2 and np.isfinite(walked["mean_distance_cm"]).all()
@@ -138,7 +139,7 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
     uri, runs = store
     run_id = runs["MAP-LIS"]
     before = _walk_map(uri, run_id, tmp_path / "before")
-    assert main(["walkmap", run_id, "--cells", "best:6", "--tracking-uri", uri]) == 2
+    assert main(["walkmap", run_id, "--cells", "best:10", "--tracking-uri", uri]) == 2
     assert "already has a walk map; add --resume" in capsys.readouterr().err
 
     store = RunStore(uri)
@@ -154,18 +155,18 @@ def test_walkmap_refuses_to_overwrite_and_resume_walks_only_what_is_missing(
         store.repertoire_trial(run_id),
         counted,
         floors=("flat", "carpet"),
-        selection=Selection.parse("best:6"),
+        selection=Selection.parse("best:10"),
         resume=True,
         seconds=float(SECONDS),
     ).frame
     assert len(walked_now) == 2 and not set(walked_now) & set(before["cell"])
-    assert len(after) == 12
+    assert len(after) == 20
     old = after[after["cell"].isin(before["cell"])].sort_values(["floor", "cell"])
     pd.testing.assert_frame_equal(
         old.reset_index(drop=True)[list(before.columns)],
         before.sort_values(["floor", "cell"]).reset_index(drop=True),
     )
-    assert len(_walk_map(uri, run_id, tmp_path / "after")) == 12
+    assert len(_walk_map(uri, run_id, tmp_path / "after")) == 20
 
 
 def test_the_explorer_colours_by_distance_and_filters_on_walking(store, lis_map, tmp_path):

@@ -4,17 +4,27 @@ loads the motor's axle."""
 
 from __future__ import annotations
 
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from linkevo.sim.robot.frailty import frailty
-from linkevo.sim.robot.hexapod import FLOORS, LAYER_PITCH_M, LEG_SLOTS, TRIPOD_OFFSETS_DEG, Frame
+from linkevo.sim.robot.hexapod import (
+    FLOORS,
+    LAYER_PITCH_M,
+    LEG_SLOTS,
+    MAX_SPACERS,
+    TRIPOD_OFFSETS_DEG,
+    Frame,
+)
+from linkevo.sim.robot.layers import segment_distance
+from linkevo.sim.robot.leg import recipe_and_leg
 from linkevo.sim.robot.mounting import (
     TOUCH_MODULES,
     Mounting,
-    _closest,
     auto_spacers,
 )
 from linkevo.sim.robot.walking import WalkSettings, walk
@@ -28,7 +38,7 @@ NONE = dict.fromkeys(LEG_SLOTS, 0)
 def test_segment_distances_match_dense_sampling():
     rng = np.random.default_rng(3)
     a, b = rng.uniform(-5, 5, (2, 400, 2, 2))
-    got = _closest(a, b)
+    got = segment_distance(a[:, 0], a[:, 1], b[:, 0], b[:, 1])
     s = np.linspace(0, 1, 801)[:, None, None]
     pa = a[:, 0] + s * (a[:, 1] - a[:, 0])  # (801, 400, 2) points along each segment
     pb = b[:, 0] + s * (b[:, 1] - b[:, 0])
@@ -72,6 +82,31 @@ def test_neighbours_that_would_meet_are_mounted_apart_and_then_never_touch():
     gap = np.linalg.norm(crank(a)[:, :, None] - crank(b)[:, None], axis=-1).min(axis=(1, 2))
     slack = 0.15  # the walk's angles fall on the leg's poses (a few tenths of a degree)
     assert gap[first] < TOUCH_MODULES + slack and (gap[:first] > TOUCH_MODULES - slack).all()
+
+
+def test_a_leg_is_mounted_no_further_out_than_its_frame_axles_reach():
+    import dataclasses
+
+    legs = dict.fromkeys(LEG_SLOTS, dataclasses.replace(crank_leg(12.0), most_spacers=0))
+    spacers = auto_spacers(legs, TRIPODS, SPACING)
+    assert spacers == NONE  # the spacer it needs would take its axles past the longest
+    phases = np.linspace(0, 2 * math.pi, 360, endpoint=False)[:, None] + np.array(
+        [TRIPODS[s] for s in LEG_SLOTS]
+    )
+    assert Mounting(legs, spacers, Frame()).strikes(phases)
+
+
+def test_a_built_legs_spacers_stop_at_the_longest_axle():
+    from linkevo.sim.robot.parts import catalogue
+
+    cells = json.loads((Path(__file__).parents[1] / "data" / "study_cells.json").read_text())
+    for cell in cells[:10]:
+        recipe, leg = recipe_and_leg(np.array(cell["genome"]), cell["mode"])
+        longest = catalogue().axles[-1].size
+        frame_axles = [j.fastener.size for j in recipe.parts.joints if j.frame]
+        assert leg.most_spacers == min(MAX_SPACERS, longest - max(frame_axles))
+        counts = recipe.parts.counts(leg.most_spacers)  # the axles at that many exist
+        assert sum(counts.values()) > 0
 
 
 @pytest.mark.parametrize("model", ["lean", "full"])

@@ -17,9 +17,9 @@ from linkevo.workers.plots.build import (
     A4_MM,
     PAGE_MARGIN_MM,
     SCALE_BAR_MM,
-    beam_holes,
     draw_layers,
     draw_template,
+    piece_holes,
     template_page,
     template_tiles,
 )
@@ -37,14 +37,21 @@ def doc():
     raise AssertionError("no random linkage has a LEGO build")
 
 
-def test_holes_sit_one_module_apart_and_on_both_joints(doc):
+def test_each_real_beam_has_its_parts_holes_one_module_apart_on_its_joints(doc):
+    from linkevo.sim.robot.parts import catalogue
+
+    holes_of = {part.number: int(part.size) for part in catalogue().beams}
     nodes = np.array(doc["lego"]["nodes"], dtype=float)
-    for beam, modules in zip(doc["beams"], doc["lego"]["lengths"], strict=True):
-        a, b = nodes[beam["start"]], nodes[beam["end"]]
-        holes = beam_holes(a, b, modules)
-        assert len(holes) == modules + 1
-        assert np.allclose(holes[[0, -1]], [a, b])
+    drawn = {}
+    for piece in doc["lego"]["pieces"]:
+        holes = piece_holes(doc, piece)
+        assert len(holes) == holes_of[piece["part"]]
         assert np.allclose(np.linalg.norm(np.diff(holes, axis=0), axis=1), 1.0, atol=1e-6)
+        drawn.setdefault(piece["bar"], []).append(holes)
+    for beam, bar in zip(doc["beams"], doc["lego"]["bars"], strict=True):
+        holes = np.concatenate(drawn[bar])
+        for node in (beam["start"], beam["end"]):  # both joints sit on a hole of its bar
+            assert np.linalg.norm(holes - nodes[node], axis=1).min() < 1e-6
 
 
 def test_layer_view_has_a_column_per_layer_up_to_three(doc, tmp_path):

@@ -1,8 +1,9 @@
 """Provides the LEGO build's drawings: the foot path as evolved and as built (PNG), the
 exploded layer view (PNG) and the 1:1 printable template (PDF, tiled on A4 pages).
 
-Beams are drawn as Technic beams: 7.2 mm wide with rounded ends and a 4.8 mm hole at
-every module (8 mm pitch), so a whole-module beam has holes on both its joints.
+Beams are drawn as the real Technic beams of the build (`sim.robot.parts`): 7.2 mm wide
+with rounded ends and a 4.8 mm hole at every module (8 mm pitch), each as long as its part,
+overhang past a joint and the overlap of joined beams included.
 """
 
 from __future__ import annotations
@@ -62,22 +63,30 @@ def beam_outline(start: np.ndarray, end: np.ndarray, scale: float = 1.0) -> np.n
     return np.concatenate([cap_end, cap_start]) * scale
 
 
-def beam_holes(start: np.ndarray, end: np.ndarray, modules: int) -> np.ndarray:
-    """Returns the holes (modules + 1, 2) of a whole-module beam from `start` to `end`."""
-    t = np.linspace(0.0, 1.0, modules + 1)[:, None]
-    return np.asarray(start, float) * (1 - t) + np.asarray(end, float) * t
+def piece_holes(doc: dict, piece: dict) -> np.ndarray:
+    """Returns the holes (H, 2) of one real beam of a document's LEGO build
+    (`doc["lego"]["pieces"]`), modules: holes `t0` to `t1` along its linkage beam, counted
+    from the beam's start node, so the part's overhang and a joined beam's overlap show."""
+    lego = doc["lego"]
+    nodes = np.array(lego["nodes"], dtype=float)
+    beam = doc["beams"][piece["beam"]]
+    start = nodes[beam["start"]]
+    along = (nodes[beam["end"]] - start) / lego["lengths"][piece["beam"]]
+    t = np.arange(piece["t0"], piece["t1"] + 1, dtype=float)[:, None]
+    return start + t * along
 
 
 def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> None:
     """Draws a document's LEGO build (`doc["lego"]`) on `ax` at `scale` per module: every
-    beam on its layer's colour (with `only_layer`, that layer's beams and the others faint),
-    holes, beam and node numbers, the frame's holes and the motor axle."""
+    real beam on its layer's colour (with `only_layer`, that layer's beams and the others
+    faint), holes, beam and node numbers, the frame's holes and the motor axle."""
     from matplotlib.patches import Circle, Polygon
 
     lego = doc["lego"]
     nodes = np.array(lego["nodes"], dtype=float)  # NaN where None
-    for beam, modules, layer in zip(doc["beams"], lego["lengths"], lego["layers"], strict=True):
-        a, b = nodes[beam["start"]], nodes[beam["end"]]
+    for piece in lego["pieces"]:
+        holes = piece_holes(doc, piece)
+        a, b, layer = holes[0], holes[-1], piece["layer"]
         if only_layer is not None and layer != only_layer:
             ax.plot(*np.stack([a, b]).T * scale, "-", color="0.85", lw=1, zorder=1)
             continue
@@ -93,14 +102,13 @@ def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> N
                 zorder=2 + layer,
             )
         )
-        for hole in beam_holes(a, b, int(modules)):
+        for hole in holes:
             ax.add_patch(
                 Circle(hole * scale, HOLE_RADIUS * scale, fc="white", ec="k", lw=0.3, zorder=20)
             )
-        middle = (a + b) / 2 * scale
         ax.text(
-            *middle,
-            f"b{beam['id']} L{layer}",
+            *(a + b) / 2 * scale,
+            f"b{piece['beam']} L{layer} {piece['part']}",
             fontsize=5,
             ha="center",
             va="center",
@@ -122,9 +130,10 @@ def _draw_build(ax, doc: dict, scale: float, only_layer: int | None = None) -> N
 def _bounds(doc: dict) -> tuple[np.ndarray, np.ndarray]:
     """Returns the (2,) lower and upper corners of a build's drawing, modules."""
     nodes = np.array(doc["lego"]["nodes"], dtype=float)  # NaN where None
-    nodes = nodes[np.isfinite(nodes).all(axis=1)]
+    holes = [piece_holes(doc, piece)[[0, -1]] for piece in doc["lego"]["pieces"]]
+    points = np.concatenate([nodes[np.isfinite(nodes).all(axis=1)], *holes])
     pad = BEAM_HALF_WIDTH + 0.5
-    return nodes.min(axis=0) - pad, nodes.max(axis=0) + pad
+    return points.min(axis=0) - pad, points.max(axis=0) + pad
 
 
 def draw_layers(doc: dict, path: Path) -> Path:
@@ -141,11 +150,7 @@ def draw_layers(doc: dict, path: Path) -> Path:
     for layer in range(n_layers):
         ax = fig.add_subplot(rows, columns, layer + 1)
         _draw_build(ax, doc, 1.0, only_layer=layer)
-        beams = [
-            f"b{b['id']}"
-            for b, lay in zip(doc["beams"], doc["lego"]["layers"], strict=True)
-            if lay == layer
-        ]
+        beams = [f"b{p['beam']}" for p in doc["lego"]["pieces"] if p["layer"] == layer]
         ax.set_title(f"layer {layer}: {', '.join(beams)}", fontsize=8)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
