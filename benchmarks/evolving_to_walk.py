@@ -1,8 +1,8 @@
 """Study: evolving legs to walk (F_w) against the paper's F_p search followed by a walk map,
 at one physics budget per trial (docs/results.md, "Evolving to walk").
 
-Run: `.venv/bin/python benchmarks/evolving_to_walk.py --fw-uri URI --fw-grid GRID_ID
---study-uri URI --study-grid GRID_ID [--walks 2000] [--trials 5] [--walkmap-times FILE]
+Run: `.venv/bin/python benchmarks/evolving_to_walk.py --fw-uri URI --fw-grid GRID_ID [GRID_ID
+...] --study-uri URI --study-grid GRID_ID [--walks 2000] [--trials 5] [--walkmap-times FILE]
 [--out docs/results]`.
 
 The arms: (a) MAP-LIS, (b) NSGA-II and (c) RANDOM with F_w, each trial of `--fw-grid`
@@ -186,7 +186,7 @@ def walks_to_reach(store: RunStore, fw_grid: str, surrogate_grid: str, tmp: Path
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--fw-uri", required=True)
-    parser.add_argument("--fw-grid", required=True)
+    parser.add_argument("--fw-grid", required=True, nargs="+", help="one or more F_w grids")
     parser.add_argument("--study-uri", required=True)
     parser.add_argument("--study-grid", required=True)
     parser.add_argument("--trials", type=int, default=5)
@@ -208,7 +208,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         if args.surrogate_grid:
             reach = walks_to_reach(
-                RunStore.open(args.fw_uri), args.fw_grid, args.surrogate_grid, Path(tmp)
+                RunStore.open(args.fw_uri), args.fw_grid[0], args.surrogate_grid, Path(tmp)
             )
             print("surrogate = true against plain MAP-LIS F_w (the same seeds):")
             print(reach.round(2).to_string(index=False))
@@ -216,7 +216,7 @@ def main() -> None:
                 f"median fewer walks: {reach.fewer_walks_qd.median():.2f}x to the QD-score, "
                 f"{reach.fewer_walks_best.median():.2f}x to the best walker"
             )
-        rows = fw_arms(RunStore.open(args.fw_uri), args.fw_grid, Path(tmp))
+        rows = [r for g in args.fw_grid for r in fw_arms(RunStore.open(args.fw_uri), g, Path(tmp))]
         rows += walk_map_arm(
             RunStore.open(args.study_uri),
             args.study_grid,

@@ -318,6 +318,7 @@ def predict_table_one(
                         "distance_cm": " ".join(f"{d:.1f}" for d in result["distance_cm"] if d),
                         "breaks": result["breaks"],
                         "reason": result["reason"],
+                        "frailty": frailty_text(result.get("frailty")),
                         "caveats": "; ".join(result.get("caveats", [])),
                         "leg": result.get("leg", ""),
                         "bound_cm": result.get("bound_cm"),
@@ -336,6 +337,16 @@ def predict_table_one(
                     f"{walked_text(result)}"
                 )
     return pd.DataFrame(rows)
+
+
+def frailty_text(frailty: dict | None) -> str:
+    """Returns a trial's frailty verdict with the ranges (over the parameters' ranges,
+    `sim.robot.frailty`) of the foot's give and the motor axle's moment, e.g. "uncertain
+    (give 14.1-30.2 mm, axle 410.0-520.3 N·mm)", or "" where none was judged."""
+    if not frailty:
+        return ""
+    give, axle = frailty["give_mm"], frailty["axle_moment_nmm"]
+    return f"{frailty['verdict']} (give {give[0]}-{give[2]} mm, axle {axle[0]}-{axle[2]} N·mm)"
 
 
 def walked_text(result: dict) -> str:

@@ -110,14 +110,17 @@ class BreakWatch:
         )
 
 
-def invalid_reason(walk: Walk, model: str) -> str:
+def invalid_reason(walk: Walk, model: str, fastest_mm_per_deg: float) -> str:
     """Returns why a walk is invalid ("" when it is not): its feet strayed past
-    `INVALID_DEVIATION_MM` from their linkage's path."""
+    `INVALID_DEVIATION_MM` from their linkage's path. `fastest_mm_per_deg`: the legs'
+    fastest joint (`Leg.fastest_joint_mm_per_deg`), named beside it: the legs whose walks
+    come apart are mostly legs near a toggle."""
     if not walk.foot_deviation_mm > INVALID_DEVIATION_MM:
         return ""
     return (
         f"invalid: the {model} model came apart, its feet strayed {walk.foot_deviation_mm:.0f} mm "
-        f"from their linkage's path (more than {INVALID_DEVIATION_MM:g} mm); not a walk"
+        f"from their linkage's path (more than {INVALID_DEVIATION_MM:g} mm); not a walk (the "
+        f"leg's fastest joint moves {fastest_mm_per_deg:.0f} mm per crank degree)"
     )
 
 

@@ -117,6 +117,15 @@ class Leg:
         """Returns (A, 2) the foot's path over one turn."""
         return self.paths[self.foot]
 
+    def fastest_joint_mm_per_deg(self) -> float:
+        """Returns how far the fastest node moves per degree of crank at its fastest over the
+        turn (mm): near a toggle a part whips round and this runs to tens or hundreds of mm,
+        where most study legs' stay below 10 (docs/walking.md, "Where the lean model breaks
+        down")."""
+        n = self.paths.shape[1]
+        steps = np.linalg.norm(np.roll(self.paths, -1, axis=1) - self.paths, axis=2)  # (M, A)
+        return float(steps.max() * UNIT_M * 1000 * n / 360)
+
     def facing(self) -> int:
         """Returns +1 when the foot moves towards +x over the lower half of its path (the
         stance) as the crank turns counter-clockwise, pushing the robot towards -x, else -1.

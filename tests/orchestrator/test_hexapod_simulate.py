@@ -15,9 +15,9 @@ from mlflow.tracking import MlflowClient
 from linkevo import sim
 from linkevo.orchestrator.cli import main
 from linkevo.sim.linkage.linkage_doc import to_document
-from linkevo.sim.robot.hexapod import LEG_SLOTS, UNIT_M, Frame
+from linkevo.sim.robot.hexapod import LEG_SLOTS, UNIT_M, Frame, Robot
 from linkevo.sim.robot.leg import LegError, leg_from_genome
-from linkevo.sim.robot.mounting import robot_spacers
+from linkevo.sim.robot.mounting import Mounting, robot_spacers
 from linkevo.workers.store.artifacts import write_json_atomic, write_parquet_atomic
 from linkevo.workers.store.tracking import ensure_experiment
 
@@ -165,15 +165,18 @@ def test_simulate_walks_a_pulled_document_and_writes_its_pictures(store, tmp_pat
 
 def test_a_leg_wider_than_the_spacing_is_mounted_apart_or_strikes_its_neighbours(tmp_path, capsys):
     genomes = sim.random_genomes(np.random.default_rng(5), 400)
-    for genome in genomes:  # the first leg whose neighbours would meet on the study's frame
+    offsets = np.radians([Robot().phases_deg[s] for s in LEG_SLOTS])
+    turn = np.linspace(0, 2 * np.pi, 120)[:, None] + offsets  # (120, 6) the gait's phases
+    for genome in genomes:  # the first leg whose neighbours would meet, and spacers part
         try:
             leg = leg_from_genome(genome)
         except LegError:
             continue
         spacers = robot_spacers(leg)
-        if any(spacers.values()):
+        mounted = Mounting(dict.fromkeys(LEG_SLOTS, leg), spacers, Frame())
+        if any(spacers.values()) and not mounted.strikes(turn):
             break
-    assert np.ptp(leg.foot_path()[:, 0]) * UNIT_M > 0.5 * Frame().leg_spacing
+    assert np.ptp(leg.piece_ends()[..., 0]) * UNIT_M > Frame().leg_spacing  # sweeps wider
     doc = tmp_path / "wide.json"
     doc.write_text(json.dumps(to_document(genome)))
     walk = ["hexapod", "simulate", "--linkage", str(doc), "--floor", "flat", "--seconds", "2"]
@@ -252,6 +255,9 @@ def test_study_predicts_first_and_modified_robots_from_the_5x5_map(store, tmp_pa
     assert modified["rule"].startswith("sought: of the neighbours with shorter beams, the nearest")
     assert all(r["source_run_id"] == run_id for r in rows)
     assert all(r["field_trial_run_id"] for r in rows)
+    for r in rows:  # the three-valued frailty verdict with the range it rests on
+        verdict = r"(sound|frail|uncertain) \(give [\d.]+-[\d.]+ mm, axle [\d.]+-[\d.]+ N·mm\)"
+        assert re.fullmatch(verdict, r["frailty"])
     printed = capsys.readouterr().out
     assert "candidate cell" not in printed  # the default rule walks no candidate
     verdicts = list(csv.DictReader((out / "table1_verdicts.csv").open()))
