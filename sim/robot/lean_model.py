@@ -299,13 +299,17 @@ def build_lean_robot(
             sites[part] = (target, origin)
             for k in np.flatnonzero((leg.piece_part == part) & reach[slot]):
                 lowest = min(lowest, _add_piece(target, origin, world, leg, ends, int(k)))
-        foot_beam = next(
+        held = [
             b
             for b in range(len(leg.beams))
             if leg.foot in leg.beams[b] and int(leg.part[b]) in coupled[slot]
-        )
-        owner, origin = sites[int(leg.part[foot_beam])]
-        foot_layers[slot] = int(leg.layer[foot_beam])
+        ]
+        if held:
+            owner, origin = sites[int(leg.part[held[0]])]
+            foot_layers[slot] = int(leg.layer[held[0]])
+        else:  # the lowest point is a bare frame hole: the foot is the frame's, as in full
+            owner, origin = body, np.zeros(3)
+            foot_layers[slot] = 0
         foot = world(nodes[leg.foot], foot_layers[slot])
         owner.add_site(name=f"{slot}/foot", pos=(foot - origin).tolist(), size=[0.004, 0, 0])
         add_motor(spec, slot, motor)

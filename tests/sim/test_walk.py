@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from linkevo.sim import decode, simulate
 from linkevo.sim.linkage.evaluating import evaluate
 from linkevo.sim.linkage.genome import random_genomes
 from linkevo.sim.robot.hexapod import FLOORS, LEG_SLOTS, TRIPOD_OFFSETS_DEG, Frame, Motor
@@ -127,6 +128,24 @@ def test_a_leg_whose_foot_never_reaches_the_floor_goes_nowhere():
     w = walk(short, FLOORS["flat"], settings=SHORT)
     assert abs(w.distance_m) < 0.002
     assert w.breaks and "frame drags" in w.reason
+
+
+def test_a_leg_whose_foot_is_a_bare_frame_hole_walks_on_both_models_credited_nothing():
+    """The lowest point of a linkage can be a frame hole no beam holds (a few in 20,000 random
+    linkages, more among a walking search's candidates): both models walk it with the foot
+    on the frame, and its level-body bound, so all a walk is credited, is nothing."""
+    genomes = random_genomes(np.random.default_rng(2), 1000)
+    batch = decode(genomes)
+    motion = simulate(batch, 40)
+    bare = [
+        i
+        for i in np.flatnonzero(motion.error == 0)
+        if motion.foot[i] not in batch.beam_int[i, : batch.n_beams[i], :2]
+    ]
+    leg = leg_from_genome(genomes[bare[0]])
+    for model in ("lean", "full"):
+        w = walk(leg, FLOORS["flat"], settings=dataclasses.replace(SHORT, model=model))
+        assert w.bound_m == 0.0 and np.isfinite(w.distance_m)
 
 
 def test_cranks_turned_backwards_walk_backwards(jansen):
