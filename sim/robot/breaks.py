@@ -6,7 +6,7 @@ a walk that stops at its break). Frail legs are judged apart (`sim.robot.frailty
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -15,6 +15,7 @@ import numpy as np
 from linkevo.sim.robot.hexapod import LEG_SLOTS
 
 if TYPE_CHECKING:
+    from linkevo.sim.robot.leg import Leg
     from linkevo.sim.robot.walk_records import WalkRecords
     from linkevo.sim.robot.walking import Walk
 
@@ -110,17 +111,18 @@ class BreakWatch:
         )
 
 
-def invalid_reason(walk: Walk, model: str, fastest_mm_per_deg: float) -> str:
+def invalid_reason(walk: Walk, model: str, legs: Iterable[Leg]) -> str:
     """Returns why a walk is invalid ("" when it is not): its feet strayed past
-    `INVALID_DEVIATION_MM` from their linkage's path. `fastest_mm_per_deg`: the legs'
-    fastest joint (`Leg.fastest_joint_mm_per_deg`), named beside it: the legs whose walks
-    come apart are mostly legs near a toggle."""
+    `INVALID_DEVIATION_MM` from their linkage's path. The reason names the legs' fastest
+    joint (`Leg.fastest_joint_mm_per_deg`): the legs whose walks come apart are mostly legs
+    near a toggle."""
     if not walk.foot_deviation_mm > INVALID_DEVIATION_MM:
         return ""
+    fastest = max(leg.fastest_joint_mm_per_deg() for leg in legs)
     return (
         f"invalid: the {model} model came apart, its feet strayed {walk.foot_deviation_mm:.0f} mm "
         f"from their linkage's path (more than {INVALID_DEVIATION_MM:g} mm); not a walk (the "
-        f"leg's fastest joint moves {fastest_mm_per_deg:.0f} mm per crank degree)"
+        f"leg's fastest joint moves {fastest:.0f} mm per crank degree)"
     )
 
 

@@ -393,8 +393,7 @@ class _Run:
             foot_deviation_mm=float(deviation.max() * 1000),
             spacers=self.mounting.spacers,
         )
-        fastest = max(leg.fastest_joint_mm_per_deg() for leg in self.mounting.legs.values())
-        invalid = invalid_reason(walk, self.settings.model, fastest)
+        invalid = invalid_reason(walk, self.settings.model, self.mounting.legs.values())
         if invalid:
             return dataclasses.replace(
                 walk, distance_m=math.nan, breaks=True, reason=invalid, invalid=True
