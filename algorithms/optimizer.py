@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -75,6 +76,12 @@ class Optimizer(Protocol):
         ...
 
 
+Proposer = Callable[[], tuple[np.ndarray, np.ndarray] | None]
+"""Proposes an optimizer's next batch in place of its own variation: genomes (K, 56) and
+their mutation strengths (K, S), or None to let the optimizer vary its parents (SAIL's
+acquisition map, `workers.walk_sail`)."""
+
+
 class BaseOptimizer:
     """The ask/tell plumbing: the random initial batch, mutation, counters and state.
 
@@ -133,6 +140,7 @@ class BaseOptimizer:
         self._best: Individuals | None = None
         self._common = CommonGrid()
         self._initial: np.ndarray | None = None
+        self._proposer: Proposer | None = None
 
     @property
     def eval_fitness(self) -> str:
@@ -156,12 +164,24 @@ class BaseOptimizer:
             raise RuntimeError("seed_with() before the first ask() only")
         self._initial = np.array(genomes, dtype=np.float64).reshape(-1, 56)
 
+    def propose_with(self, proposer: Proposer | None) -> None:
+        """Takes every batch after the first from `proposer` whenever it proposes one (its
+        size is the proposal's), instead of mutating parents; None: the optimizer's own
+        variation throughout. The proposer is not part of the state: give it again on
+        resume."""
+        self._proposer = proposer
+
     def ask(self) -> np.ndarray:
-        """Returns the next batch, (B, 56): random (or seeded) genomes first, then mutated
-        parents."""
+        """Returns the next batch, (B, 56): random (or seeded) genomes first, then the
+        proposer's batch (`propose_with`) or mutated parents."""
         if self._pending is not None:
             raise RuntimeError("ask() called twice without tell(); tell the last batch first")
-        if self._iteration == 0 and self._initial is not None:
+        proposed = None
+        if self._iteration and self._proposer is not None and not self.random_batches:
+            proposed = self._proposer()
+        if proposed is not None:
+            genomes, sigma = (np.array(a, dtype=np.float64) for a in proposed)
+        elif self._iteration == 0 and self._initial is not None:
             genomes = self._initial
             sigma = initial_sigma(self._rng, len(genomes), self.mode, self.initial_sigma)
         elif self._iteration == 0 or self.random_batches:
@@ -319,10 +339,10 @@ class BaseOptimizer:
         self._rng = decode_rng(state["optimizer.rng"])
         evaluations = int(state["optimizer.evaluations"])
         iteration = int(state["optimizer.iteration"])
-        if iteration < 0 or evaluations < iteration * self.batch_size or evaluations < 0:
+        if iteration < 0 or evaluations < iteration:
             raise ValueError(
                 f"optimizer.iteration {iteration} and optimizer.evaluations {evaluations}: "
-                f"allowed: iteration >= 0 and evaluations >= iteration x batch ({self.batch_size})"
+                "allowed: iteration >= 0 and evaluations >= iteration (a batch holds a genome)"
             )
         self._evaluations, self._iteration = evaluations, iteration
         self._pending = None

@@ -85,20 +85,27 @@ class WalkModel:
         self.distance_mean = torch.zeros(len(FLOOR_ORDER))
         self.distance_scale = torch.ones(len(FLOOR_ORDER))
 
-    def fit(self, data: WalkData, seed: int = 0) -> WalkModel:
-        """Trains every member on its bootstrap sample of `data`; returns the model."""
+    def fit(self, data: WalkData, seed: int = 0, warm: bool = False) -> WalkModel:
+        """Trains every member on its bootstrap sample of `data`; returns the model.
+
+        Args:
+            warm: fine-tune: start from the model's weights and keep its standardisation
+                (a fitted model refitted on new walks: a walking trial's head start),
+                rather than from fresh weights and `data`'s own standardisation.
+        """
         if not len(data):
             raise ValueError("a walk model needs at least one walk to learn from")
         x = torch.from_numpy(np.asarray(data.features, np.float32))
-        self.feature_mean = x.mean(dim=0)
-        self.feature_scale = x.std(dim=0).clamp_min(1e-6)
         d = torch.from_numpy(np.asarray(data.distance, np.float32))
         sound = ~torch.isnan(d)
-        for k in range(len(FLOOR_ORDER)):
-            values = d[sound[:, k], k]
-            if len(values) > 1:
-                self.distance_mean[k] = values.mean()
-                self.distance_scale[k] = values.std().clamp_min(1e-3)
+        if not warm:
+            self.feature_mean = x.mean(dim=0)
+            self.feature_scale = x.std(dim=0).clamp_min(1e-6)
+            for k in range(len(FLOOR_ORDER)):
+                values = d[sound[:, k], k]
+                if len(values) > 1:
+                    self.distance_mean[k] = values.mean()
+                    self.distance_scale[k] = values.std().clamp_min(1e-3)
         x = (x - self.feature_mean) / self.feature_scale
         d = torch.nan_to_num((d - self.distance_mean) / self.distance_scale)
         b = torch.from_numpy(np.asarray(data.breaks, np.float32))
@@ -109,7 +116,7 @@ class WalkModel:
             for i, member in enumerate(self.members):
                 generator = torch.Generator().manual_seed(seed * 1000 + i)
                 for layer in member:
-                    if isinstance(layer, nn.Linear):
+                    if isinstance(layer, nn.Linear) and not warm:
                         bound = 1.0 / np.sqrt(layer.in_features)
                         with torch.no_grad():
                             layer.weight.uniform_(-bound, bound, generator=generator)

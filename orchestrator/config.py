@@ -22,10 +22,12 @@ from linkevo.sim.study import (
     MAX_WALKS,
     MIN_ANGLES,
     MODES,
+    SAIL_APPROACHES,
     SINGLE_FITNESSES,
     STUDY_APPROACHES,
     STUDY_EVALUATIONS,
     STUDY_FITNESSES,
+    SURROGATES,
     TARGETS,
     WALKING_FITNESS,
     is_map_elites,
@@ -110,9 +112,15 @@ class GridConfig:
             earlier MAP-Elites trial in the same store with a walk map, whose walked cells
             make each trial's first batch (`workers.seed_repertoire`); "" (the default)
             for none.
-        surrogate: the walking MAP-Elites trials walk only the candidates the learned walk
-            model, fitted on each trial's walks as it goes, predicts could enter or improve
-            the archive (`workers.walk_surrogate`); false (the default) walks every one.
+        surrogate: how the walking MAP-Elites trials use the learned walk model: "screen"
+            (or true) walks only the candidates the model, fitted on each trial's walks as
+            it goes, predicts could enter or improve the archive (`workers.walk_surrogate`);
+            "sail" runs each trial's search in the model and walks what it proposes (SAIL,
+            `workers.walk_sail`; MAP-WH, MAP-LIS, MAP-ST); "" or false (the default) walks
+            every candidate the search makes.
+        walk_model: the SAIL trials' head start: the run id of a walk model in the same
+            store (`linkevo walkmodel fit`), refitted with each trial's walks; "" (the
+            default) for none.
         physics: the simulated robot's parameters that differ from the study's robot
             (`sim.robot.hexapod.Physics`; a `[physics]` table, as the robot config's, e.g. the
             one `linkevo hexapod calibrate` writes), for every walk of the grid's trials
@@ -155,7 +163,8 @@ class GridConfig:
     walks: int = 0
     walk_batch: int = DEFAULT_WALK_BATCH
     seed_from: str = ""
-    surrogate: bool = False
+    surrogate: str | bool = ""
+    walk_model: str = ""
     physics: dict[str, float] = field(default_factory=dict)
     gait: dict[str, float] = field(default_factory=dict)
     mounting: dict[str, int] = field(default_factory=dict)
@@ -185,7 +194,8 @@ class GridConfig:
 
     def identity(self) -> dict[str, Any]:
         """Returns the keys that determine the grid's results (what the grid id hashes).
-        `walk_rerank`, `seed_from`, `surrogate`, `physics`, `gait` and `mounting` count
+        `walk_rerank`, `seed_from`, `surrogate`, `walk_model`, `physics`, `gait` and
+        `mounting` count
         only when they are on, and `walks`
         and `walk_batch` only for a grid with walking trials, so grids without them keep
         their ids. `trials` does not
@@ -200,6 +210,10 @@ class GridConfig:
             del out["seed_from"]
         if not out["surrogate"]:
             del out["surrogate"]
+        elif out["surrogate"] == "screen":
+            out["surrogate"] = True  # as linkevo hashed it before SAIL: screen grids keep ids
+        if not out["walk_model"]:
+            del out["walk_model"]
         for key in ("physics", "gait", "mounting"):
             if not out[key]:
                 del out[key]
@@ -313,8 +327,25 @@ def _validate(cfg: GridConfig) -> None:
         raise _fail("walks", cfg.walks, 'allowed: 0 unless fitnesses holds "Fw"')
     if not isinstance(cfg.seed_from, str):
         raise _fail("seed_from", cfg.seed_from, "allowed: a run id (a string)")
-    if not isinstance(cfg.surrogate, bool):
-        raise _fail("surrogate", cfg.surrogate, "allowed: true or false")
+    if isinstance(cfg.surrogate, bool):
+        object.__setattr__(cfg, "surrogate", "screen" if cfg.surrogate else "")
+    if cfg.surrogate not in SURROGATES:
+        raise _fail(
+            "surrogate", cfg.surrogate, 'allowed: "screen" (or true), "sail", "" (or false)'
+        )
+    if not isinstance(cfg.walk_model, str):
+        raise _fail("walk_model", cfg.walk_model, "allowed: a walk model's run id (a string)")
+    if cfg.walk_model and cfg.surrogate != "sail":
+        raise _fail("walk_model", cfg.walk_model, 'allowed: with surrogate = "sail" only')
+    if cfg.surrogate == "sail":
+        others = [a for a in cfg.approaches if a not in SAIL_APPROACHES]
+        if others:
+            raise _fail(
+                "surrogate",
+                cfg.surrogate,
+                f"allowed with approaches {', '.join(SAIL_APPROACHES)} (this grid has "
+                f"{', '.join(others)}, whose descriptors are learned)",
+            )
     not_maps = [a for a in cfg.approaches if not is_map_elites(a)]
     for key in ("seed_from", "surrogate"):  # walking MAP-Elites trials only
         if getattr(cfg, key) and (cfg.fitnesses != (WALKING_FITNESS,) or not_maps):

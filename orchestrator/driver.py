@@ -29,6 +29,7 @@ from linkevo.orchestrator.launch_checks import (
     check_seed,
     check_store,
     check_store_holds_grid,
+    check_walk_model,
     trial_specs,
 )
 from linkevo.orchestrator.lease import Lease, Subject
@@ -133,6 +134,7 @@ def launch(
         experiment_id = ensure_experiment(uri, cfg.experiment)
         store = RunStore(uri, cfg.experiment, experiment_id=experiment_id)
         check_seed(store, cfg.seed_from)
+        check_walk_model(store, cfg.walk_model)
         lease = Lease.take(store, Subject.grid(grid.grid_id))
         root = work_root(cfg, uri)
         finished = _settle_earlier_runs(store, grid, root, resume=resume, restart=restart)

@@ -9,8 +9,10 @@ side. Where the trial has a walk map (`linkevo walkmap`), the map can be coloure
 distance the simulated robot walks on a floor, filtered on "walks at least" and "does not
 break", and a cell's panel shows its walks. Where the trial has predicted walks (`linkevo
 walkmodel predict`), cells without a walk are coloured by the learned walk model's
-prediction, marked as predicted on the map, in the legend, the panels and the pins. A
-grid's page holds every repertoire trial behind a trial picker.
+prediction, marked as predicted on the map, in the legend, the panels and the pins; a SAIL
+trial (`workers.walk_sail`) shows its walked map with its prediction map's other cells,
+predicted by the trial's own model, marked alike. A grid's page holds every repertoire
+trial behind a trial picker.
 
 Each trial's cells travel as gzip-compressed JSON (base64) in the page, inflated by the
 browser's own `DecompressionStream` when the trial is shown, so the page needs no network
@@ -33,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.pull import own_modules
+from linkevo.orchestrator.pull import SAIL_MODEL, own_modules
 from linkevo.sim import decode, simulate
 from linkevo.sim.linkage.decoding import BEAM_KINDS, NODE_KINDS, LinkageBatch
 from linkevo.sim.linkage.kinematics import Motion, take_rows
@@ -45,7 +47,7 @@ from linkevo.sim.study import DEFAULT_ANGLES, FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_bytes_atomic
 from linkevo.workers.store.runs import RunStore, TrialRun
-from linkevo.workers.store.tables import bin_columns, space_of
+from linkevo.workers.store.tables import bin_columns, prediction_rows, space_of
 
 GRID_DRAWN = 500
 """Cells per trial whose linkage a grid page draws by default (the lowest-loss ones)."""
@@ -232,6 +234,17 @@ def _walked(walks: pd.DataFrame | None) -> tuple[list[str], dict[tuple[int, str]
     return floors, walked
 
 
+def with_prediction_map(
+    table: pd.DataFrame, prediction: pd.DataFrame
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Returns a SAIL trial's walked map with the prediction map's cells it lacks (their
+    loss minus the predicted value, `workers.walk_sail`), and the predicted walks of every
+    predicted cell (a cell with a walk on a floor shows the walk there)."""
+    shared = [c for c in table.columns if c in prediction.columns]
+    extra = prediction.loc[~prediction["cell"].isin(table["cell"]), shared]
+    return pd.concat([table, extra], ignore_index=True), prediction_rows(prediction)
+
+
 def _predicted(predicted: pd.DataFrame | None) -> dict[tuple[int, str], list]:
     """Returns, per (cell, floor) predicted, the page's [predicted cm, spread cm, probability
     of breaking]."""
@@ -333,6 +346,10 @@ def explore(
             model_run = None
             if predicted is not None:
                 model_run = store.tags(trial.run_id).get(layout.PREDICTED_BY)
+            sail = store.prediction_map(trial.run_id, Path(tmp) / f"{trial.run_id}-sail")
+            if sail is not None:
+                table, predicted = with_prediction_map(table, sail)
+                model_run = SAIL_MODEL
             views.append(repertoire_view(table, trial, drawn, walks, predicted, model_run))
             if progress is not None:
                 progress(done, trial)

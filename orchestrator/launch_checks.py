@@ -96,6 +96,7 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
                     batch_size=cfg.walk_batch,
                     seed_from=cfg.seed_from,
                     surrogate=cfg.surrogate,
+                    walk_model=cfg.walk_model,
                     **settings,
                 )
             else:
@@ -113,6 +114,20 @@ def trial_specs(grid: Grid) -> dict[str, TrialSpec]:
             raise ConfigError(f"trial {cell.key}: {exc}") from exc
         specs[cell.key] = spec
     return specs
+
+
+def check_walk_model(store: RunStore, run_id: str) -> None:
+    """Raises ConfigError unless `run_id` (grid key `walk_model`; "" passes) is a walk model
+    of the store that this linkevo's features fit: what a SAIL trial's head start reads."""
+    if not run_id:
+        return
+    from linkevo.workers.store.runs import NotFound
+    from linkevo.workers.store.walk_models import WalkModelError, load_model
+
+    try:
+        load_model(store, run_id)
+    except (NotFound, WalkModelError) as exc:
+        raise ConfigError(f"config key 'walk_model' = {run_id!r} is invalid: {exc}") from None
 
 
 def check_seed(store: RunStore, run_id: str) -> None:

@@ -31,6 +31,7 @@ from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.artifacts import write_json_atomic, write_text_atomic
 from linkevo.workers.store.linkages import SourceLinkage
 from linkevo.workers.store.runs import NotFound, RunStore
+from linkevo.workers.store.tables import prediction_rows
 
 SHEET_COLUMNS = (
     "beam",
@@ -45,6 +46,8 @@ SHEET_COLUMNS = (
     "layer",
     "part",
 )
+SAIL_MODEL = "fitted on this SAIL trial's walks"
+"""How pull and the explorer name the model that predicted a SAIL trial's cells."""
 
 
 def own_modules(lengths) -> list[int]:
@@ -427,15 +430,20 @@ def _logged_walks(store: RunStore, source: SourceLinkage, tmp: Path) -> pd.DataF
 
 def predicted_walks(store: RunStore, source: SourceLinkage) -> dict[str, dict]:
     """Returns the pulled cell's rows of its trial's predicted walks (`linkevo walkmodel
-    predict`) per floor (predicted distance, spread, probability of breaking, the model's
-    run); {} when they were not predicted."""
+    predict`, or a SAIL trial's prediction map for a cell only it holds) per floor
+    (predicted distance, spread, probability of breaking, the model's run); {} when they
+    were not predicted."""
     if not source.run_id or source.cell is None:
         return {}
     with tempfile.TemporaryDirectory() as tmp:
-        predicted = store.walk_prediction(source.run_id, Path(tmp))
+        if source.predicted:  # a SAIL trial's predicted cell: its own model's prediction
+            predicted = prediction_rows(store.prediction_map(source.run_id, Path(tmp)))
+            model = SAIL_MODEL
+        else:
+            predicted = store.walk_prediction(source.run_id, Path(tmp))
+            model = store.tags(source.run_id).get(layout.PREDICTED_BY, "")
     if predicted is None:
         return {}
-    model = store.tags(source.run_id).get(layout.PREDICTED_BY, "")
     rows = predicted[predicted["cell"] == source.cell]
     order = in_floor_order(rows["floor"])
     rows = rows.sort_values("floor", key=lambda f: f.map(order.index), kind="stable")

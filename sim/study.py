@@ -124,6 +124,12 @@ MAX_WALKS = 10_000_000
 CANDIDATES_PER_WALK = 100
 """A walking trial's guard: it ends after this many candidates per walk in its budget,
 should its search stop proposing legs that can be walked."""
+SURROGATES: tuple[str, ...] = ("", "screen", "sail")
+"""How a walking MAP-Elites trial uses the learned walk model: not at all, to screen what
+its search proposes, or to run the search itself (SAIL)."""
+SAIL_APPROACHES: tuple[str, ...] = ("MAP-WH", "MAP-LIS", "MAP-ST")
+"""The MAP-Elites approaches a SAIL trial runs: fixed descriptors (MAP-AU's are learned
+from the archive it fills, which a model of walks cannot predict)."""
 
 
 ROBOTS: tuple[str, ...] = ("first", "modified")

@@ -15,6 +15,9 @@ from linkevo.workers.result_pool import ResultPool
 from linkevo.workers.trial_spec import resolve_target
 
 if TYPE_CHECKING:
+    from linkevo.algorithms import Optimizer
+    from linkevo.algorithms.optimizer import Proposer
+    from linkevo.algorithms.walk_model import WalkModel
     from linkevo.workers.trial_spec import TrialSpec
 
 Pending = Callable[[], Evaluation]
@@ -43,6 +46,11 @@ class Evaluator(Protocol):
         """Returns the evaluator's own running metrics (the walks of a walking trial)."""
         ...
 
+    def proposals(self, optimizer: Optimizer) -> Proposer | None:
+        """Returns what proposes the optimizer's batches instead of its own variation (a
+        SAIL trial's rounds, `workers.walk_sail`), or None."""
+        ...
+
     def state_dict(self) -> dict[str, np.ndarray]:
         """Returns the evaluator's state as npz-safe arrays, for the trial's checkpoint."""
         ...
@@ -62,6 +70,10 @@ class Stateless:
     def metrics(self) -> dict[str, float]:
         """Returns no metrics."""
         return {}
+
+    def proposals(self, optimizer: Optimizer) -> Proposer | None:
+        """Proposes nothing: the optimizer varies its own parents."""
+        return None
 
     def state_dict(self) -> dict[str, np.ndarray]:
         """Returns no state."""
@@ -85,10 +97,13 @@ def make_evaluator(
     actors: int = 0,
     cpus_per_actor: float = 1.0,
     placement_group: object = None,
+    head_start: WalkModel | None = None,
 ) -> Evaluator:
     """Returns the evaluator a trial needs: in this process (`actors` = 0) or on `actors`
     evaluator actors of the running Ray instance (placed in `placement_group`'s last
-    bundles); a walking trial's (`workers.walk_evaluator`) for fitness F_w."""
+    bundles); a walking trial's (`workers.walk_evaluator`) for fitness F_w, with a SAIL
+    trial's rounds (`workers.walk_sail`, from the walk model `head_start`: the model of
+    `spec.walk_model`, read from the store)."""
     if spec.walking_trial:
         from linkevo.workers.walk_evaluator import WalkingEvaluator
 
@@ -97,14 +112,20 @@ def make_evaluator(
             from linkevo.workers.ray_evaluator import ActorWalkers
 
             walkers = ActorWalkers.start(actors, cpus_per_actor, placement_group)
+        sail = None
+        if spec.surrogate == "sail":
+            from linkevo.workers.walk_sail import Sail
+
+            sail = Sail(spec.approach, spec.mode, spec.n_angles, spec.seed, spec.walks, head_start)
         two = spec.eval_fitness != spec.fitness
         return WalkingEvaluator(
             spec.mode,
             spec.n_angles,
             two_objective=two,
             walkers=walkers,
-            surrogate=spec.surrogate,
+            surrogate=spec.surrogate == "screen",
             robot=spec.robot(),
+            sail=sail,
         )
     if not actors:
         return LocalEvaluator(spec.eval_fitness, spec.mode, spec.target, spec.n_angles)

@@ -37,6 +37,7 @@ from linkevo.workers.store.run_layout import (
     CHECKPOINT_DIR,
     ENCODER_PT,
     METRICS_FILE,
+    PREDICTION_MAP,
     RESULT_FILE,
     SETTINGS_FILE,
 )
@@ -206,6 +207,7 @@ def run_trial(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     optimizer = build_optimizer(spec)
+    optimizer.propose_with(evaluator.proposals(optimizer))  # type: ignore[attr-defined]
     log = MetricsCsv(out_dir / METRICS_FILE)
     folder = out_dir / CHECKPOINT_DIR
     if not (resume and _resume(spec, optimizer, evaluator, log, recorder, folder)):
@@ -345,6 +347,10 @@ def _finish(
     if spec.walking_trial:
         log = evaluator.log  # type: ignore[attr-defined]
         write_walk_tables(log, view, spec, out_dir)
+        if spec.surrogate == "sail":
+            prediction = evaluator.prediction_map(optimizer)  # type: ignore[attr-defined]
+            if prediction:  # no model, or it predicts no buildable leg: no map to draw
+                write_parquet_atomic(out_dir / PREDICTION_MAP, prediction)
         confirmed = confirm_best_walker(spec, log, *optimizer.best(), out_dir)
         if confirmed:
             recorder.log_iteration(optimizer.iteration, confirmed)

@@ -23,7 +23,9 @@ from linkevo.sim.study import (
     MIN_ANGLES,
     MODES,
     MULTI_OBJECTIVE,
+    SAIL_APPROACHES,
     SINGLE_FITNESSES,
+    SURROGATES,
     TARGETS,
     WALKING_FITNESS,
     evaluated_fitness,
@@ -70,9 +72,13 @@ class TrialSpec:
         seed_from: a walking MAP-Elites trial's warm start: the run id of an earlier
             MAP-Elites trial whose repertoire and walk map make the first batch
             (`workers.seed_repertoire`); "" for none.
-        surrogate: a walking MAP-Elites trial walks only the candidates the learned walk
-            model, fitted on its walks as it goes, predicts could enter or improve its
-            archive (`workers.walk_surrogate`).
+        surrogate: how a walking MAP-Elites trial uses the learned walk model: "" not at
+            all; "screen" walks only the candidates the model, fitted on its walks as it
+            goes, predicts could enter or improve its archive (`workers.walk_surrogate`);
+            "sail" runs the search in the model and walks what it proposes (SAIL,
+            `workers.walk_sail`). true and false stand for "screen" and "".
+        walk_model: a SAIL trial's head start: the run id of a fitted walk model (`linkevo
+            walkmodel fit`); "" for none.
         physics: the simulated robot's parameters that differ from the study's robot
             (`sim.robot.hexapod.Physics`), for every walk of the trial (F_w's, `walk_rerank`'s).
         gait: the gait's settings that differ from the study's (`sim.robot.gait.GaitConfig`).
@@ -99,7 +105,8 @@ class TrialSpec:
     walk_rerank: int = 0
     walks: int = 0
     seed_from: str = ""
-    surrogate: bool = False
+    surrogate: str = ""
+    walk_model: str = ""
     physics: dict = field(default_factory=dict)
     gait: dict = field(default_factory=dict)
     phases: dict = field(default_factory=dict)
@@ -152,21 +159,47 @@ class TrialSpec:
                 f"seed_from = {self.seed_from!r} is for walking trials of a MAP-Elites "
                 f"approach ({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
             )
-        if not isinstance(self.surrogate, bool):
-            fail(f"surrogate must be true or false, got {self.surrogate!r}")
+        if isinstance(self.surrogate, bool):
+            object.__setattr__(self, "surrogate", "screen" if self.surrogate else "")
+        if self.surrogate not in SURROGATES:
+            fail(
+                f"surrogate must be one of {', '.join(map(repr, SURROGATES))}, "
+                f"got {self.surrogate!r}"
+            )
         if self.surrogate and not (self.walking_trial and is_map_elites(self.approach)):
             fail(
-                f"surrogate = true is for walking trials of a MAP-Elites approach "
+                f"surrogate = {self.surrogate!r} is for walking trials of a MAP-Elites approach "
                 f"({', '.join(MAP_ELITES)}), not {self.approach} with {self.fitness}"
             )
-        if self.surrogate:
+        if self.surrogate == "screen":
             from linkevo.workers.walk_surrogate import START
 
             if self.walks <= START:
                 fail(
-                    f"surrogate = true with walks = {self.walks}: the walk model is first fitted "
-                    f"after {START} walks, so it would screen none; allowed: walks > {START}"
+                    f"surrogate = 'screen' with walks = {self.walks}: the walk model is first "
+                    f"fitted after {START} walks, so it would screen none; allowed: walks > {START}"
                 )
+        if self.surrogate == "sail" and self.approach not in SAIL_APPROACHES:
+            fail(
+                f"surrogate = 'sail' runs {', '.join(SAIL_APPROACHES)}, not {self.approach} "
+                "(its descriptors are learned from the archive it fills)"
+            )
+        if self.surrogate == "sail" and not self.walk_model:
+            from linkevo.workers.walk_sail import START as SAIL_START
+
+            if self.walks <= SAIL_START:
+                fail(
+                    f"surrogate = 'sail' with walks = {self.walks} and no walk_model: the walk "
+                    f"model is first fitted after {SAIL_START} walks, so it would propose none; "
+                    f"allowed: walks > {SAIL_START}, or a head start (walk_model)"
+                )
+        if not isinstance(self.walk_model, str):
+            fail(f"walk_model must be a walk model's run id (a string), got {self.walk_model!r}")
+        if self.walk_model and self.surrogate != "sail":
+            fail(
+                f"walk_model = {self.walk_model!r} is a SAIL trial's head start: "
+                "set surrogate = 'sail'"
+            )
         for part in ROBOT_PARTS:
             if not isinstance(getattr(self, part), dict):
                 fail(f"{part} must be a table of numbers, got {getattr(self, part)!r}")
@@ -212,8 +245,14 @@ class TrialSpec:
         return self.evaluations // self.batch_size
 
     def to_dict(self) -> dict[str, object]:
-        """Returns the JSON-able fields."""
-        return asdict(self)
+        """Returns the JSON-able fields; `surrogate` "" and "screen" as false and true and
+        an empty `walk_model` left out, as linkevo wrote them before SAIL (their
+        checkpoints resume)."""
+        out = asdict(self)
+        out["surrogate"] = {"": False, "screen": True}.get(self.surrogate, self.surrogate)
+        if not self.walk_model:
+            del out["walk_model"]
+        return out
 
 
 def resolve_target(target: str) -> Target:

@@ -8,7 +8,7 @@ import shutil
 import socket
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TypeVar
 
@@ -178,8 +178,9 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         if run.info.status == "RUNNING":
             wait(lambda r=run: store.end_run(r.info.run_id, "KILLED", "superseded by a retry"))
     run_id = wait(lambda: store.create_run(job.trial_key, job.tags()))
-    spec_values = asdict(job.spec)
+    spec_values = job.spec.to_dict()
     names = SPEC_PARAMS + (("walks", "surrogate") if job.spec.walking_trial else ())
+    names += ("walk_model",) if job.spec.walk_model else ()
     wait(lambda: store.log_params(run_id, {k: spec_values[k] for k in names}))
     start = time.monotonic()
     evaluator: Evaluator | None = None
@@ -190,11 +191,17 @@ def run_trial_job(job: TrialJob) -> TrialOutcome:
         spec = job.spec
         if job.evaluators == 0:
             numba.set_num_threads(min(job.threads, numba.config.NUMBA_NUM_THREADS))
+        head_start = None
+        if spec.walk_model:
+            from linkevo.workers.store.walk_models import load_model  # torch: only when asked
+
+            head_start = wait(lambda: load_model(store, spec.walk_model)[0])
         evaluator = make_evaluator(
             spec,
             actors=job.evaluators,
             cpus_per_actor=job.cpus_per_evaluator,
             placement_group=ray.util.get_current_placement_group() if job.evaluators else None,
+            head_start=head_start,
         )
         seed = None
         if spec.seed_from:

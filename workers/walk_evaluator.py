@@ -18,18 +18,16 @@ from __future__ import annotations
 import dataclasses
 import socket
 from collections.abc import Callable, Iterator, Mapping
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from linkevo.sim.linkage.decoding import LinkageBatch
 from linkevo.sim.linkage.evaluating import evaluate_with_motion
 from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.genome import validate_genomes
-from linkevo.sim.linkage.kinematics import Motion, simulate, take_rows
 from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.hexapod import Robot
-from linkevo.sim.robot.walk_features import features_of
+from linkevo.sim.robot.walk_features import features_of_rows
 from linkevo.sim.robot.walk_fitness import (
     CandidateWalk,
     floor_losses,
@@ -37,10 +35,14 @@ from linkevo.sim.robot.walk_fitness import (
     walk_candidate,
 )
 from linkevo.sim.robot.walk_rows import Stage
-from linkevo.sim.study import DEFAULT_ANGLES
 from linkevo.workers.evaluators import Bar, Pending
 from linkevo.workers.seed_repertoire import Seed
 from linkevo.workers.walk_log import WalkLog
+
+if TYPE_CHECKING:
+    from linkevo.algorithms import Optimizer
+    from linkevo.algorithms.optimizer import Proposer
+    from linkevo.workers.walk_sail import Sail
 
 
 class Walkers(Protocol):
@@ -94,6 +96,8 @@ class WalkingEvaluator:
         robot: the robot walked (default: the study's robot).
         surrogate: pre-screen the candidates with the learned walk model fitted on the
             trial's walks (`workers.walk_surrogate`); single-objective only.
+        sail: run the trial's search in the walk model (`workers.walk_sail`): the
+            evaluator walks every candidate it is given, which its `proposals` chose.
     """
 
     def __init__(
@@ -104,6 +108,7 @@ class WalkingEvaluator:
         walkers: Walkers | None = None,
         surrogate: bool = False,
         robot: Robot | None = None,
+        sail: Sail | None = None,
     ) -> None:
         self.mode = mode
         self.robot = robot or Robot()
@@ -115,6 +120,7 @@ class WalkingEvaluator:
             from linkevo.workers.walk_surrogate import WalkSurrogate
 
             self.surrogate = WalkSurrogate(mode)
+        self.sail = sail
         self.log = WalkLog.empty()
         self._iteration = 0
         self._in_flight: Callable[[], Evaluation] | None = None
@@ -156,9 +162,12 @@ class WalkingEvaluator:
         if self.surrogate is not None:
             self.surrogate.refresh(self.log)
             worth = self.surrogate.worth_walking(
-                lambda: self._features(batch, motion, built), bars[built]
+                lambda: features_of_rows(batch, motion, built), bars[built]
             )
             built, skipped = built[worth], built[~worth]
+        if self.sail is not None:  # a SAIL trial never walks past its budget
+            left = max(self.sail.walks - self.log.counts["walks"], 0)
+            built, skipped = built[:left], np.concatenate([skipped, built[left:]])
         known = self.log.known()
         walks = self.walkers.walk(
             genomes[built], self.mode, frozenset(known), bars[built], self.robot
@@ -190,14 +199,6 @@ class WalkingEvaluator:
         self._in_flight = collect
         return collect
 
-    def _features(self, batch: LinkageBatch, motion: Motion, rows: np.ndarray) -> np.ndarray:
-        """The walk model's features of a batch's rows, from the batch's own decoding and
-        motion (simulated again only when the trial's crank angles are not the study's)."""
-        batch = take_rows(batch, rows)
-        if self.n_angles == DEFAULT_ANGLES:
-            return features_of(batch, take_rows(motion, rows))
-        return features_of(batch, simulate(batch, DEFAULT_ANGLES))
-
     def _tally(self, rejected: int, walks: list[CandidateWalk]) -> None:
         counts = self.log.counts
         counts["rejected_2d"] += rejected
@@ -213,6 +214,20 @@ class WalkingEvaluator:
                 counts["walk_failures"] += 1
             else:
                 counts["rejected_build"] += 1
+
+    def proposals(self, optimizer: Optimizer) -> Proposer | None:
+        """Returns what proposes the optimizer's batches: SAIL's rounds on this evaluator's
+        walk log (`workers.walk_sail`), or None (the optimizer's own variation)."""
+        if self.sail is None:
+            return None
+        return self.sail.proposer(lambda: self.log, optimizer)  # type: ignore[arg-type]
+
+    def prediction_map(self, optimizer: Optimizer) -> dict[str, np.ndarray]:
+        """Returns a SAIL trial's prediction map (`workers.walk_sail.Sail.prediction_map`);
+        {} for any other."""
+        if self.sail is None:
+            return {}
+        return self.sail.prediction_map(self.log, optimizer)  # type: ignore[arg-type]
 
     def metrics(self) -> dict[str, float]:
         """Returns the walk log's running counts and best walks (`WalkLog.metrics`)."""

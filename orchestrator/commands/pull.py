@@ -188,6 +188,8 @@ def handle(args: argparse.Namespace) -> int:
         return _print_cells(store, ref, args.list, args.buildable)
     source = load_source(store, ref)
     cell = "its best linkage" if source.cell is None else f"cell {source.cell}"
+    if source.predicted:
+        cell += " of its prediction map (SAIL: predicted, never walked)"
     print(
         f"pulling run {source.run_id} ({source.approach}, {source.fitness}), {cell}",
         file=sys.stderr,

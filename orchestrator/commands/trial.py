@@ -20,7 +20,7 @@ from linkevo.sim.study import (
     SINGLE_FITNESSES,
     WALKING_FITNESS,
 )
-from linkevo.workers.store.run_layout import CHECKPOINT_DIR, METRICS_FILE
+from linkevo.workers.store.run_layout import CHECKPOINT_DIR, METRICS_FILE, PREDICTION_MAP
 
 if TYPE_CHECKING:
     from linkevo.workers.trial_spec import TrialSpec
@@ -53,10 +53,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--surrogate",
-        action="store_true",
-        help="--fitness Fw, a MAP-Elites approach: walk only the candidates the learned walk "
-        "model (fitted on the trial's walks as it goes) predicts could enter the archive",
+        nargs="?",
+        const="screen",
+        default="",
+        choices=("screen", "sail"),
+        help="--fitness Fw, a MAP-Elites approach: with the learned walk model, fitted on the "
+        "trial's walks as it goes, 'screen' (alone: --surrogate) walks only the candidates "
+        "it predicts could enter the archive; 'sail' runs the search in the model and walks "
+        "what it proposes (MAP-WH, MAP-LIS, MAP-ST; writes prediction_map.parquet)",
     )
+    parser.add_argument(
+        "--walk-model",
+        default="",
+        metavar="RUN_ID",
+        help="--surrogate sail: start from this walk model of the store (linkevo walkmodel "
+        "fit), refitted with the trial's walks",
+    )
+    options.store(parser)
     parser.add_argument(
         "--config",
         type=Path,
@@ -130,6 +143,14 @@ def handle(args: argparse.Namespace) -> int:
 
     spec = trial_spec(args)
     check_out_dir(args.out, args.resume)
+    head_start = None
+    if spec.walk_model:
+        from linkevo.workers.store.runs import RunStore
+        from linkevo.workers.store.walk_models import load_model
+
+        head_start, _ = load_model(
+            RunStore.open(args.tracking_uri, args.experiment), spec.walk_model
+        )
     walking = spec.walking_trial
     with writer_lock(args.out, "linkevo trial"):  # one trial writes a folder at a time
         recorder = ProgressRecorder(
@@ -139,7 +160,7 @@ def handle(args: argparse.Namespace) -> int:
             disable=args.no_progress,
         )
         try:
-            with make_evaluator(spec) as evaluator:
+            with make_evaluator(spec, head_start=head_start) as evaluator:
                 result = run_trial(spec, evaluator, recorder, args.out, resume=args.resume)
         finally:
             recorder.close()
@@ -153,7 +174,26 @@ def handle(args: argparse.Namespace) -> int:
     )
     if "best_models_agree" in result.metrics:
         print(confirmation_line(result.metrics))
+    if (args.out / PREDICTION_MAP).exists():
+        print(prediction_map_line(args.out / PREDICTION_MAP))
     return 0
+
+
+def prediction_map_line(path: Path) -> str:
+    """A SAIL trial's prediction map in one line: its cells, how many were never walked,
+    and how many of those it predicts to walk `WALKER_CM` on both floors."""
+    import pandas as pd
+
+    from linkevo.sim.robot.walk_rows import WALKER_CM
+
+    table = pd.read_parquet(path)
+    never = table[~table["walked"]]
+    walkers = (never[[f"{f}_predicted_cm" for f in FLOOR_ORDER]] >= WALKER_CM).all(axis=1)
+    return (
+        f"prediction map: {len(table)} cells, {len(never)} never walked, of which "
+        f"{int(walkers.sum())} predicted to walk {WALKER_CM:.0f} cm on both floors "
+        f"({path.name}; linkevo pull RUN_ID:CELL builds one)"
+    )
 
 
 def confirmation_line(metrics: dict[str, float]) -> str:
@@ -200,12 +240,17 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
             if args.evaluations is not None:
                 settings["evaluations"] = args.evaluations
             spec = TrialSpec.walking(
-                args.approach, args.walks, surrogate=args.surrogate, **settings
+                args.approach,
+                args.walks,
+                surrogate=args.surrogate,
+                walk_model=args.walk_model,
+                **settings,
             )
         else:
             for given, option in (
                 (args.walks is not None, "--walks"),
                 (args.surrogate, "--surrogate"),
+                (args.walk_model, "--walk-model"),
             ):
                 if given:
                     raise CliError(

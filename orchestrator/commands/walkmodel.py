@@ -114,8 +114,9 @@ def fit_handler(args: argparse.Namespace) -> int:
 
 def predict_handler(args: argparse.Namespace) -> int:
     """Handles `linkevo walkmodel predict`."""
-    from linkevo.orchestrator.walk_model_runs import load_model, predict
+    from linkevo.orchestrator.walk_model_runs import predict
     from linkevo.workers.store.runs import RunStore
+    from linkevo.workers.store.walk_models import load_model
 
     store = RunStore.open(args.tracking_uri, args.experiment)
     trials = store.repertoires(args.ref).trials

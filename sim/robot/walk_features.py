@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.linkage.decoding import LinkageBatch, decode
-from linkevo.sim.linkage.kinematics import Motion, simulate
+from linkevo.sim.linkage.kinematics import Motion, simulate, take_rows
 from linkevo.sim.linkage.physical import physical_checks, quiet_all_nan
 from linkevo.sim.robot.builds import lego_builds
 from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status, credited_cm
@@ -93,6 +93,15 @@ def walk_features(genomes: np.ndarray, mode: str = "paper") -> np.ndarray:
     genomes = np.asarray(genomes, dtype=np.float64).reshape(-1, 56)
     evolved = decode(genomes, mode)
     return features_of(evolved, simulate(evolved, DEFAULT_ANGLES))
+
+
+def features_of_rows(batch: LinkageBatch, motion: Motion, rows: np.ndarray) -> np.ndarray:
+    """Returns `walk_features` (len(rows), F) of a batch's `rows` from the batch's own
+    decoding and motion (simulated again only when its crank angles are not the study's)."""
+    batch = take_rows(batch, rows)
+    if motion.valid.shape[1] == DEFAULT_ANGLES:
+        return features_of(batch, take_rows(motion, rows))
+    return features_of(batch, simulate(batch, DEFAULT_ANGLES))
 
 
 @quiet_all_nan

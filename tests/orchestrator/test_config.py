@@ -76,7 +76,14 @@ def test_resolved_toml_reads_back_to_an_equal_config(tmp_path):
         ("trials = 2\n", ['approaches=["EA"'], "not a TOML value"),
         ("trials = [1, 2\n", [], "malformed TOML"),
         ("trials = true\n", [], "'trials' = True"),
-        ("surrogate = 1\n", [], "'surrogate' = 1.*true or false"),
+        ("surrogate = 1\n", [], '\'surrogate\' = 1.*"screen" \\(or true\\), "sail"'),
+        ('surrogate = "sail"\nwalk_model = 3\n', [], "'walk_model' = 3.*run id"),
+        ('walk_model = "abc"\n', [], "'walk_model'.*with surrogate = \"sail\" only"),
+        (
+            'fitnesses = ["Fw"]\nwalks = 99\napproaches = ["MAP-AU"]\nsurrogate = "sail"\n',
+            [],
+            "'surrogate'.*MAP-AU, whose descriptors are learned",
+        ),
         ('fitnesses = ["Fw"]\nwalks = 9\nsurrogate = true\n', [], "'surrogate'.*MAP-Elites"),
     ],
 )

@@ -172,3 +172,63 @@ def test_a_walk_prediction_frame_is_as_the_reader_checks_it(store, fitted, tmp_p
         MlflowClient(uri).download_artifacts(runs["MAP-ST"], "walkpred.parquet", str(tmp_path))
     )
     assert list(frame.columns[:5]) == ["cell", "floor", "predicted_cm", "spread_cm", "p_break"]
+
+
+def test_a_sail_trial_starts_from_the_model_and_its_predicted_cells_are_pulled_and_shown(
+    store, fitted, tmp_path, capsys, monkeypatch
+):
+    """`linkevo trial --surrogate sail --walk-model RUN_ID`: the model proposes from the
+    second batch; a never-walked cell of the prediction map is pulled with its prediction
+    apart from any walk, walks with `hexapod simulate`, and is marked predicted on the
+    explorer's map."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    from linkevo.workers import walk_sail
+
+    monkeypatch.setattr(walk_sail, "GENERATIONS", 4)
+    monkeypatch.setattr(walk_sail, "CHILDREN", 32)
+    uri, runs = store
+    out = tmp_path / "sail"
+    words = ["--approach", "MAP-LIS", "--fitness", "Fw", "--walks", "20", "--seed", "2"]
+    words += ["--surrogate", "sail", "--walk-model", fitted["run_id"], "--tracking-uri", uri]
+    assert main(["trial", *words, "--out", str(out), "--no-progress"]) == 0
+    metrics = pd.read_csv(out / "metrics.csv")
+    assert metrics["walks"].iloc[-1] == 20
+    assert (metrics["rejected_2d"].iloc[1:] == metrics["rejected_2d"].iloc[0]).all()  # proposed
+    refused = ["trial", *words[:-4], "--walk-model", runs["MAP-ST"], "--tracking-uri", uri]
+    assert main([*refused, "--out", str(tmp_path / "no")]) == 2
+    assert "is not a walk model" in capsys.readouterr().err and not (tmp_path / "no").exists()
+    client = MlflowClient(uri)
+    tags = {"grid_id": GRID, "linkevo.kind": "trial", "approach": "MAP-LIS", "fitness": "Fw"}
+    run_id = client.create_run("0", run_name="MAP-LIS/Fw/00", tags=tags).info.run_id
+    client.log_param(run_id, "mode", "paper")
+    client.log_artifacts(run_id, str(out))
+    client.set_terminated(run_id)
+
+    prediction = pd.read_parquet(out / "prediction_map.parquet")
+    never = prediction[~prediction["walked"]].sort_values("loss")
+    cell = int(never["cell"].iloc[0])
+    capsys.readouterr()
+    pulled = tmp_path / "pulled"
+    assert main(["pull", f"{run_id}:{cell}", "--out", str(pulled), "--tracking-uri", uri]) == 0
+    printed = capsys.readouterr().err
+    assert f"cell {cell} of its prediction map (SAIL: predicted, never walked)" in printed
+    flat = never.iloc[0]["flat_predicted_cm"]
+    assert f"predicted walk: flat {flat:.1f}" in printed and "simulated walk" not in printed
+    document = json.loads((pulled / "linkage.json").read_text())
+    assert document["predicted_walk"]["flat"]["walk_model"] == "fitted on this SAIL trial's walks"
+    assert "simulated_walk" not in document
+    words = ["hexapod", "simulate", "--linkage", str(pulled / "linkage.json"), "--floor", "flat"]
+    code, printed = run(*words, "--seconds", "3", "--json", "--no-log")
+    walked = json.loads(printed)  # a real walk to set beside the prediction
+    assert code == 0 and (walked["breaks"] or walked["mean_distance_cm"] is not None)
+
+    page = tmp_path / "page.html"
+    assert main(["explore", run_id, "--tracking-uri", uri, "--out", str(page), "--no-log"]) == 0
+    with chromium() as browser:
+        open_explorer(browser, page)
+        Select(browser.find_element(By.ID, "colour-by")).select_by_visible_text("distance, flat")
+        legend = browser.find_element(By.ID, "legend").text
+        assert "predicted by the walk model fitted on this SAIL trial's walks, not walked" in legend
+        assert browser.execute_script("return window.explorer.predictedOnMap(arguments[0])", cell)

@@ -161,6 +161,38 @@ def test_the_surrogate_skips_walks_and_a_resumed_trial_refits_the_same_model(tmp
     assert (folder / "metrics.csv").read_text() == (whole.out_dir / "metrics.csv").read_text()
 
 
+def test_a_sail_trial_walks_what_the_model_proposes_and_resumes_to_the_same_maps(
+    tmp_path, monkeypatch
+):
+    from linkevo.workers import walk_sail
+
+    monkeypatch.setattr(walk_sail, "START", 12)  # a model after 12 walks
+    monkeypatch.setattr(walk_sail, "GENERATIONS", 4)  # a small illumination per round
+    monkeypatch.setattr(walk_sail, "CHILDREN", 32)
+    spec = TrialSpec.walking("MAP-LIS", 36, seed=3, checkpoint_every=1, surrogate="sail")
+    whole = run_trial(spec, make_evaluator(spec), NullRecorder(), tmp_path / "whole")
+    metrics = pd.read_csv(whole.out_dir / "metrics.csv")
+    assert metrics["walks"].iloc[-1] == 36  # never past its budget
+    rounds = int(metrics.loc[metrics["walks"] >= 12, "iteration"].iloc[0])
+    sail = metrics[metrics["iteration"] > rounds]  # the model's rounds
+    assert len(sail) and (sail["rejected_2d"] == metrics["rejected_2d"].iloc[rounds - 1]).all()
+    assert (sail["evaluations"].diff().dropna() <= walk_sail.PROPOSALS).all()
+    prediction = pd.read_parquet(whole.out_dir / "prediction_map.parquet")
+    assert len(prediction) > 36 and prediction["cell"].is_unique
+    assert {"flat_predicted_cm", "carpet_spread_cm", "carpet_p_break", "walked"} <= set(prediction)
+    repertoire = pd.read_parquet(whole.out_dir / "repertoire.parquet")
+    walked = prediction["cell"].isin(repertoire["cell"])
+    assert (prediction["walked"] == walked).all() and (~walked).any()
+
+    folder = tmp_path / "cut"
+    with pytest.raises(RuntimeError, match="went away"):
+        run_trial(spec, Crashing(make_evaluator(spec), fail_at=rounds + 1), NullRecorder(), folder)
+    run_trial(spec, make_evaluator(spec), NullRecorder(), folder, resume=True)
+    assert (folder / "metrics.csv").read_text() == (whole.out_dir / "metrics.csv").read_text()
+    again = pd.read_parquet(folder / "prediction_map.parquet")
+    pd.testing.assert_frame_equal(again, prediction)
+
+
 def test_nsga2_walks_the_two_floors_as_its_two_objectives(tmp_path):
     spec = TrialSpec.walking("NSGA2", 30, seed=2)
     result = run_trial(spec, make_evaluator(spec), NullRecorder(), tmp_path)
@@ -200,8 +232,15 @@ def test_broken_walks_lose_to_every_sound_one(tmp_path):
         (lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, walks=5), "for fitness Fw only"),
         (lambda: TrialSpec.walking("MAP-LIS", 0), r"walks must be an integer in \[1, 10,000,000\]"),
         (lambda: TrialSpec.walking("EA", 10, walk_rerank=3), "walk_rerank is for the path"),
-        (lambda: TrialSpec.walking("NSGA2", 10, surrogate=True), "surrogate = true is for"),
-        (lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, surrogate=True), "surrogate = true is for"),
+        (lambda: TrialSpec.walking("NSGA2", 10, surrogate=True), "surrogate = 'screen' is for"),
+        (
+            lambda: TrialSpec("MAP-LIS", "Fp", 1000, 32, surrogate=True),
+            "surrogate = 'screen' is for",
+        ),
+        (lambda: TrialSpec.walking("MAP-LIS", 300, surrogate="model"), "surrogate must be one of"),
+        (lambda: TrialSpec.walking("MAP-AU", 300, surrogate="sail"), "descriptors are learned"),
+        (lambda: TrialSpec.walking("MAP-LIS", 50, surrogate="sail"), "allowed: walks > 64"),
+        (lambda: TrialSpec.walking("MAP-LIS", 300, walk_model="abc"), "set surrogate = 'sail'"),
     ],
 )
 def test_a_walking_trial_is_refused_as_specified(make, message):

@@ -1,6 +1,7 @@
 """Provides linkage references into MLflow: `RUN_ID` (a trial's best), `RUN_ID:CELL` or
-`RUN_ID:B0,B1[,...]` (a repertoire cell by its flat index or its bin coordinates), and the
-listing of a repertoire's best cells with their physical checks."""
+`RUN_ID:B0,B1[,...]` (a repertoire cell by its flat index or its bin coordinates; of a SAIL
+trial, a cell of its prediction map where its walked map has none), and the listing of a
+repertoire's best cells with their physical checks."""
 
 from __future__ import annotations
 
@@ -62,6 +63,8 @@ class SourceLinkage:
     fitness: str
     document: dict
     grid_id: str = ""
+    predicted: bool = False
+    """The cell is a SAIL trial's prediction map's, never walked (`workers.walk_sail`)."""
 
 
 def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
@@ -70,8 +73,10 @@ def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
     A cell's genome is turned into a document with `sim.linkage.linkage_doc.to_document` in the
     run's `mode` (param; default "paper").
 
+    A cell that a SAIL trial's walked map lacks is looked up in its prediction map.
+
     Raises:
-        LinkageError: unknown run, or a cell not in the repertoire.
+        LinkageError: unknown run, or a cell not in the repertoire (nor prediction map).
         NotFound: the run lacks the artefact (its best linkage or repertoire).
     """
     from linkevo.workers.store.runs import NotFound
@@ -81,13 +86,21 @@ def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
     except NotFound as exc:
         raise LinkageError(f"--linkage: no MLflow run with id {ref.run_id!r}") from exc
     tags = run.data.tags
+    predicted = False
     with tempfile.TemporaryDirectory() as tmp:
         if ref.cell is None and ref.bins is None:
             path = store.download(ref.run_id, layout.BEST_JSON, Path(tmp))
             document, cell = read_document(path), None
         else:
             table = store.repertoire(ref.run_id, Path(tmp))
-            cell, genome = _find_cell(table, ref)
+            try:
+                cell, genome = _find_cell(table, ref)
+            except LinkageError:
+                sail = store.prediction_map(ref.run_id, Path(tmp) / "sail")
+                if sail is None:
+                    raise
+                cell, genome = _find_cell(sail, ref, "walked map nor its prediction map")
+                predicted = True
             document = to_document(genome, run.data.params.get("mode", "paper"))
     return SourceLinkage(
         run_id=ref.run_id,
@@ -97,10 +110,11 @@ def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
         fitness=tags.get(layout.FITNESS, "unknown"),
         document=document,
         grid_id=tags.get(layout.GRID_ID, ""),
+        predicted=predicted,
     )
 
 
-def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:
+def _find_cell(table, ref: LinkageRef, where: str = "repertoire") -> tuple[int, np.ndarray]:
     """Returns (flat cell, genome (56,)) of the repertoire row a cell reference names."""
     bins = bin_columns(table.columns)
     if ref.bins is not None:
@@ -118,7 +132,7 @@ def _find_cell(table, ref: LinkageRef) -> tuple[int, np.ndarray]:
         what = f"cell {ref.cell}"
     if not hit.any():
         raise LinkageError(
-            f"{ref.run_id}: {what} is not in the repertoire ({len(table)} filled cells); "
+            f"{ref.run_id}: {what} is not in the {where} ({len(table)} filled cells); "
             f"list them with: linkevo pull {ref.run_id} --list"
         )
     row = table.iloc[int(np.flatnonzero(hit)[0])]

@@ -112,6 +112,11 @@ WALK_PREDICTION = "walkpred.parquet"
 """A repertoire trial's predicted walks (`linkevo walkmodel predict`): a row per filled cell
 and floor (`workers.store.tables.PREDICTION_COLUMNS` plus the cell's bins); the run's tag
 `PREDICTED_BY` names the model's run."""
+PREDICTION_MAP = "prediction_map.parquet"
+"""A SAIL trial's prediction map (`workers.walk_sail`): a row per cell its walk model
+illuminated, as a repertoire's (cell, loss, error, desc_d, bin_d, genome) with the
+predicted walk per floor (`<floor>_predicted_cm`, `<floor>_spread_cm`, `<floor>_p_break`)
+and whether the cell is in the walked map (`walked`)."""
 PREDICTED_BY = "walk_model"
 """The tag of a trial run whose walks were predicted: the walk model's run id."""
 WALK_MODEL_PT = "walk_model.pt"

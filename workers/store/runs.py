@@ -452,6 +452,19 @@ class RunStore:
             return None
         return read_walk_prediction(self.download(run_id, layout.WALK_PREDICTION, into), run_id)
 
+    def prediction_map(self, run_id: str, into: Path) -> pd.DataFrame | None:
+        """Returns a SAIL trial's prediction map (`workers.walk_sail`), checked by content,
+        or None when the run has none.
+
+        Raises:
+            ArtefactError: it is damaged.
+        """
+        from linkevo.workers.store.tables import read_prediction_map
+
+        if layout.PREDICTION_MAP not in self.artefact_names(run_id):
+            return None
+        return read_prediction_map(self.download(run_id, layout.PREDICTION_MAP, into), run_id)
+
 
 def latest_per_trial(runs: pd.DataFrame) -> pd.DataFrame:
     """Returns one run per trial key of a trial table: a FINISHED one if any, else the

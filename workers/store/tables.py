@@ -215,3 +215,44 @@ def read_walk_prediction(path: Path, run_id: str) -> pd.DataFrame:
     if any(figures[c].to_numpy().dtype.kind != "f" for c in figures):
         raise fail("has figures that are not numbers")
     return frame
+
+
+def read_prediction_map(path: Path, run_id: str) -> pd.DataFrame:
+    """Returns a SAIL trial's prediction map (`workers.walk_sail`) read from `path`, checked
+    by content as a repertoire is, with its predicted walks per floor.
+
+    Raises:
+        ArtefactError: as `read_repertoire`, or a floor's predictions missing or not
+            numbers.
+    """
+    from linkevo.workers.store.run_layout import PREDICTION_MAP
+
+    table = read_repertoire(path, run_id, PREDICTION_MAP)
+    wanted = [f"{floor}_{figure}" for floor in FLOOR_ORDER for figure in PREDICTION_COLUMNS[2:]]
+    bad = [c for c in wanted if c not in table or table[c].to_numpy().dtype.kind != "f"]
+    if bad:
+        raise ArtefactError(
+            PREDICTION_MAP,
+            run_id,
+            f"lacks the predictions {', '.join(bad)} (or they are not numbers)",
+            "it was damaged or replaced after the trial wrote it: run the trial again",
+        )
+    return table
+
+
+def prediction_rows(table: pd.DataFrame) -> pd.DataFrame:
+    """Returns a prediction map's predicted walks as `walkpred.parquet` holds them: a row
+    per cell and floor (`PREDICTION_COLUMNS`, then the cell's bins)."""
+    bins = bin_columns(table.columns)
+    parts = [
+        pd.DataFrame(
+            {
+                "cell": table["cell"].to_numpy(),
+                "floor": floor,
+                **{f: table[f"{floor}_{f}"].to_numpy() for f in PREDICTION_COLUMNS[2:]},
+                **{b: table[b].to_numpy() for b in bins},
+            }
+        )
+        for floor in FLOOR_ORDER
+    ]
+    return pd.concat(parts, ignore_index=True)
