@@ -13,11 +13,14 @@ Each round (every trial iteration after the first, once the model exists):
    neither floor (a robot that breaks adds nothing to the walking QD-score). A child that
    fails the 2-D checks is kept only where a cell holds nothing better, and never walked;
 3. a batch of at most `PROPOSALS` acquisition elites (and no more than the walks left) is
-   walked: elites predicted to walk forwards, not walked before in the trial, whose
-   acquisition beats what their cell of the walked map holds (a walk that cannot enter
-   the walked map is not worth its cost), spread over the map: a scrambled Sobol sequence
-   over the descriptor space, each point taking the nearest such elite not yet taken (as
-   SAIL spreads its samples).
+   walked. An elite qualifies when it is predicted to walk forwards, was not walked
+   before in the trial, its acquisition beats what its cell of the walked map holds (a
+   walk that cannot enter the walked map is not worth its cost) and the model gives its
+   robot under `P_BREAK_SKIP` probability of breaking on each floor. Of these, the
+   `SHORTLIST` x batch with the largest gain (the acquisition less what the walked map's
+   cell already scores) are spread over the map as SAIL spreads its samples: each point of
+   a scrambled Sobol sequence over the descriptor space takes the nearest one not yet
+   taken.
 
 The walked candidates enter the **walked map** (the trial's repertoire: the walking
 QD-score, the best walker and every reader of a repertoire see real walks only). Until
@@ -55,18 +58,21 @@ from linkevo.sim.robot.walk_fitness import REJECTED_LOSS
 from linkevo.sim.robot.walk_rows import FLOOR_ORDER
 from linkevo.sim.study import DEFAULT_WALK_BATCH, SAIL_APPROACHES, WALKING_FITNESS
 from linkevo.workers.walk_log import WalkLog
-from linkevo.workers.walk_surrogate import training_data
+from linkevo.workers.walk_surrogate import P_BREAK_SKIP, training_data
 
 START = 64
 """Walks the trial makes before it fits its first model (without a head start)."""
-KAPPA = 1.0
-"""Spreads added to each floor's predicted distance in the acquisition."""
+KAPPA = 0.5
+"""Spreads added to each floor's predicted distance in the acquisition (the screen's)."""
 GENERATIONS = 60
 """MAP-Elites generations in the model per round..."""
 CHILDREN = 128
 """...each of this many children."""
 PROPOSALS = DEFAULT_WALK_BATCH
 """Acquisition elites walked per round (at most)."""
+SHORTLIST = 4
+"""The batch is spread over this many times its size of the qualifying elites with the
+largest gain."""
 
 
 def acquisition(prediction: Prediction, kappa: float) -> np.ndarray:
@@ -226,13 +232,16 @@ class Sail:
                 return None
             walked = {g.tobytes() for g in walk_log.genome}
             value = -found.elites.loss
+            held = walked_map.archive.incumbents(found.elites.desc)
             fresh = np.array([g.tobytes() not in walked for g in found.elites.genome], bool)
-            beats = found.elites.loss < walked_map.archive.incumbents(found.elites.desc)
-            worth = np.flatnonzero((value > 0) & fresh & beats)
+            sound = (found.prediction.p_break < P_BREAK_SKIP).all(axis=1)
+            worth = np.flatnonzero((value > 0) & fresh & (found.elites.loss < held) & sound)
             if not len(worth):
                 return None
-            resolution = walked_map.archive.space.resolution
             n = min(PROPOSALS, left)
+            gain = value[worth] - np.maximum(-held[worth], 0.0)
+            worth = worth[np.argsort(-gain, kind="stable")[: SHORTLIST * n]]
+            resolution = walked_map.archive.space.resolution
             picked = worth[spread_pick(found.bins[worth], resolution, n, len(walk_log))]
             return found.elites.genome[picked], found.elites.sigma[picked]
 
