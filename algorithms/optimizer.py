@@ -17,6 +17,11 @@ from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.genome import random_genomes
 from linkevo.sim.study import DEFAULT_ANGLES, SINGLE_FITNESSES, evaluated_fitness
 
+Proposer = Callable[[], tuple[np.ndarray, np.ndarray] | None]
+"""Proposes an optimizer's next batch in place of its own variation: genomes (K, 56) and
+their mutation strengths (K, S), or None to let the optimizer vary its parents (SAIL's
+acquisition map, `workers.walk_sail`)."""
+
 
 class Optimizer(Protocol):
     """What the trial loop drives: ask for genomes, tell their evaluation, report."""
@@ -40,6 +45,10 @@ class Optimizer(Protocol):
 
     def ask(self) -> np.ndarray:
         """Returns the next batch of genomes to evaluate, (B, 56)."""
+        ...
+
+    def propose_with(self, proposer: Proposer | None) -> None:
+        """Takes later batches from `proposer` when it proposes one (`Proposer`)."""
         ...
 
     def tell(self, genomes: np.ndarray, evaluation: Evaluation) -> None:
@@ -74,12 +83,6 @@ class Optimizer(Protocol):
     def load_state_dict(self, state: dict[str, np.ndarray]) -> None:
         """Restores a state from `state_dict`, so the search continues identically."""
         ...
-
-
-Proposer = Callable[[], tuple[np.ndarray, np.ndarray] | None]
-"""Proposes an optimizer's next batch in place of its own variation: genomes (K, 56) and
-their mutation strengths (K, S), or None to let the optimizer vary its parents (SAIL's
-acquisition map, `workers.walk_sail`)."""
 
 
 class BaseOptimizer:

@@ -17,8 +17,9 @@ wall and CPU seconds (the trial process's own, from `os.wait4`).
 The prediction map's honesty (the SAIL arms): `--sample` cells per trial of its prediction
 map that the trial never walked, drawn at random, are built and walked now with the
 walking fitness's walk on both floors: Spearman of predicted against walked distance per
-floor (cells that walked there without breaking), and, of the cells predicted to walk at
-least 50 cm on both floors, the share that do.
+floor (cells that walked there without breaking), how many real parts cannot build, and,
+of the cells predicted to walk at least 50 cm on both floors (and of those also predicted
+not to break, p_break < 0.5 on each), the share that do.
 
 Run: `.venv/bin/python benchmarks/sail.py --work DIR [--walks 2000] [--sail-walks 500]
 [--seeds 5] [--walk-model RUN_ID --tracking-uri URI] [--arms plain,screen,sail,sail-head]`.
@@ -84,11 +85,11 @@ def walks_to_reach(metrics: pd.DataFrame, target: float) -> float:
     return float(reached["walks"].iloc[0]) if len(reached) else np.nan
 
 
-def walk_cell(genome: np.ndarray) -> dict[str, float]:
-    """Walks one predicted cell's leg now: credited cm per floor (NaN where it breaks or no
-    leg builds)."""
+def walk_cell(genome: np.ndarray) -> dict[str, object]:
+    """Walks one predicted cell's leg now: its stage and credited cm per floor (NaN where
+    it breaks or no leg builds)."""
     walked = walk_candidate(genome, "paper")
-    out = dict.fromkeys(FLOOR_ORDER, np.nan)
+    out: dict[str, object] = {"stage": str(walked.stage), **dict.fromkeys(FLOOR_ORDER, np.nan)}
     if walked.stage == Stage.WALKED:
         for row in walked.rows:
             if row["status"] == Status.WALKED and not row["breaks"]:
@@ -98,7 +99,9 @@ def walk_cell(genome: np.ndarray) -> dict[str, float]:
 
 def honesty(folders: list[Path], sample: int, seed: int) -> dict[str, float]:
     """Walks `sample` never-walked cells of each trial's prediction map; returns the
-    figures."""
+    figures: Spearman per floor over the cells that walked there soundly, how many real
+    parts did not build, and of the cells predicted to walk `WALKER_CM` on both floors
+    without breaking (p_break < 0.5 on each), how many do."""
     rng = np.random.default_rng(seed)
     picked = []
     for folder in folders:
@@ -110,15 +113,19 @@ def honesty(folders: list[Path], sample: int, seed: int) -> dict[str, float]:
     with ProcessPoolExecutor(2) as pool:
         walked = pd.DataFrame(list(pool.map(walk_cell, genomes, chunksize=4)))
     figures: dict[str, float] = {"cells": float(len(cells))}
+    figures["no_build"] = float((walked["stage"] != str(Stage.WALKED)).sum())
     for floor in FLOOR_ORDER:
         sound = walked[floor].notna().to_numpy()
         rho = spearmanr(cells[f"{floor}_predicted_cm"][sound], walked[floor][sound]).statistic
         figures[f"spearman_{floor}"] = float(rho)
         figures[f"walked_{floor}"] = float(sound.sum())
-    promised = (cells[[f"{f}_predicted_cm" for f in FLOOR_ORDER]] >= WALKER_CM).all(axis=1)
-    kept = (walked.fillna(-np.inf) >= WALKER_CM).all(axis=1)
-    figures["promised"] = float(promised.sum())
-    figures["promised_kept"] = float((promised & kept).sum())
+    far = (cells[[f"{f}_predicted_cm" for f in FLOOR_ORDER]] >= WALKER_CM).all(axis=1)
+    sound = (cells[[f"{f}_p_break" for f in FLOOR_ORDER]] < 0.5).all(axis=1)
+    kept = (walked[list(FLOOR_ORDER)].fillna(-np.inf) >= WALKER_CM).all(axis=1)
+    figures["far"] = float(far.sum())
+    figures["far_kept"] = float((far & kept).sum())
+    figures["promised"] = float((far & sound).sum())
+    figures["promised_kept"] = float((far & sound & kept).sum())
     return figures
 
 
@@ -190,8 +197,10 @@ def main() -> None:
                     f"({figures[f'walked_{f}']:.0f} walked soundly)"
                     for f in FLOOR_ORDER
                 )
-                + f"; predicted >= {WALKER_CM:.0f} cm on both floors: "
-                f"{figures['promised']:.0f}, of which {figures['promised_kept']:.0f} walk it"
+                + f"; real parts build no leg for {figures['no_build']:.0f}; predicted >= "
+                f"{WALKER_CM:.0f} cm on both floors: {figures['far']:.0f} (of which "
+                f"{figures['far_kept']:.0f} walk it), and without breaking: "
+                f"{figures['promised']:.0f} (of which {figures['promised_kept']:.0f} walk it)"
             )
 
 

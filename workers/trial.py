@@ -207,7 +207,7 @@ def run_trial(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     optimizer = build_optimizer(spec)
-    optimizer.propose_with(evaluator.proposals(optimizer))  # type: ignore[attr-defined]
+    optimizer.propose_with(evaluator.proposals(optimizer))
     log = MetricsCsv(out_dir / METRICS_FILE)
     folder = out_dir / CHECKPOINT_DIR
     if not (resume and _resume(spec, optimizer, evaluator, log, recorder, folder)):

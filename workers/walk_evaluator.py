@@ -96,8 +96,8 @@ class WalkingEvaluator:
         robot: the robot walked (default: the study's robot).
         surrogate: pre-screen the candidates with the learned walk model fitted on the
             trial's walks (`workers.walk_surrogate`); single-objective only.
-        sail: run the trial's search in the walk model (`workers.walk_sail`): the
-            evaluator walks every candidate it is given, which its `proposals` chose.
+        sail: run the trial's search in the walk model (`workers.walk_sail`): its
+            `proposals` choose the batches, and no batch is walked past the budget.
     """
 
     def __init__(

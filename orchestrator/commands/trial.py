@@ -181,18 +181,20 @@ def handle(args: argparse.Namespace) -> int:
 
 def prediction_map_line(path: Path) -> str:
     """A SAIL trial's prediction map in one line: its cells, how many were never walked,
-    and how many of those it predicts to walk `WALKER_CM` on both floors."""
+    and how many of those it predicts to walk `WALKER_CM` on both floors without breaking
+    (a break probability under one half on each, as the explorer reads it)."""
     import pandas as pd
 
     from linkevo.sim.robot.walk_rows import WALKER_CM
 
     table = pd.read_parquet(path)
     never = table[~table["walked"]]
-    walkers = (never[[f"{f}_predicted_cm" for f in FLOOR_ORDER]] >= WALKER_CM).all(axis=1)
+    far = (never[[f"{f}_predicted_cm" for f in FLOOR_ORDER]] >= WALKER_CM).all(axis=1)
+    sound = (never[[f"{f}_p_break" for f in FLOOR_ORDER]] < 0.5).all(axis=1)
     return (
         f"prediction map: {len(table)} cells, {len(never)} never walked, of which "
-        f"{int(walkers.sum())} predicted to walk {WALKER_CM:.0f} cm on both floors "
-        f"({path.name}; linkevo pull RUN_ID:CELL builds one)"
+        f"{int((far & sound).sum())} predicted to walk {WALKER_CM:.0f} cm on both floors "
+        f"without breaking ({path.name}; linkevo pull RUN_ID:CELL builds one)"
     )
 
 
