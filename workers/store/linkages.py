@@ -99,7 +99,7 @@ def load_source(store: RunStore, ref: LinkageRef) -> SourceLinkage:
                 sail = store.prediction_map(ref.run_id, Path(tmp) / "sail")
                 if sail is None:
                     raise
-                cell, genome = _find_cell(sail, ref, "walked map nor its prediction map")
+                cell, genome = _find_cell(sail, ref, "walked map or its prediction map")
                 predicted = True
             document = to_document(genome, run.data.params.get("mode", "paper"))
     return SourceLinkage(
