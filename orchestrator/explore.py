@@ -88,9 +88,10 @@ def repertoire_view(
         the level-body no-slip bound 0/1, slides 0/1 (`sim.robot.walk_rows.SLIDING_SHARE`)]
         or None where the cell was not walked on it;
         with predicted walks p: per floor, [predicted cm, spread cm, probability of
-        breaking] or None; for the `PARTS_CELLS` lowest-loss cells that pass the 2-D
-        checks, r (`real_parts`): the parts of one leg, or why real parts cannot build
-        it. Positions are rounded
+        breaking] or None; q 1 where the loss itself is predicted (a SAIL trial's
+        prediction-map cell, never walked); for the `PARTS_CELLS` lowest-loss cells that
+        pass the 2-D checks, r (`real_parts`): the parts of one leg, or why real parts
+        cannot build it. Positions are rounded
         to 0.1 module, lengths to 0.01, descriptors to 0.001, distances to 0.1 cm.
     """
     table = table.sort_values(["loss", "cell"], kind="stable").reset_index(drop=True)
@@ -122,6 +123,7 @@ def repertoire_view(
     floors, walked = _walked(walks)
     parts = real_parts(batch, motion, np.flatnonzero(checks.buildable)[:PARTS_CELLS])
     guessed = _predicted(predicted)
+    predicted_loss = table.get("predicted_loss", pd.Series(False, index=table.index)).to_numpy()
     if guessed:
         floors = in_floor_order({*floors, *(floor for _, floor in guessed)})
     cells = []
@@ -161,6 +163,8 @@ def repertoire_view(
             cells[-1]["w"] = [walked.get((cell, floor)) for floor in floors]
         if guessed:
             cells[-1]["p"] = [guessed.get((cell, floor)) for floor in floors]
+        if predicted_loss[i]:
+            cells[-1]["q"] = 1
         if i in parts:
             cells[-1]["r"] = parts[i]
     return {
@@ -242,7 +246,9 @@ def with_prediction_map(
     predicted cell (a cell with a walk on a floor shows the walk there)."""
     shared = [c for c in table.columns if c in prediction.columns]
     extra = prediction.loc[~prediction["cell"].isin(table["cell"]), shared]
-    return pd.concat([table, extra], ignore_index=True), prediction_rows(prediction)
+    extra = extra.assign(predicted_loss=True)
+    table = pd.concat([table.assign(predicted_loss=False), extra], ignore_index=True)
+    return table, prediction_rows(prediction)
 
 
 def _predicted(predicted: pd.DataFrame | None) -> dict[tuple[int, str], list]:

@@ -56,7 +56,7 @@ from linkevo.sim.linkage.physical import physical_checks
 from linkevo.sim.robot.walk_features import FEATURE_NAMES, features_of_rows
 from linkevo.sim.robot.walk_fitness import REJECTED_LOSS
 from linkevo.sim.robot.walk_rows import FLOOR_ORDER
-from linkevo.sim.study import DEFAULT_WALK_BATCH, SAIL_APPROACHES, WALKING_FITNESS
+from linkevo.sim.study import DEFAULT_WALK_BATCH, WALKING_FITNESS
 from linkevo.workers.walk_log import WalkLog
 from linkevo.workers.walk_surrogate import P_BREAK_SKIP, training_data
 
@@ -164,12 +164,14 @@ class Sail:
     """The SAIL rounds of one walking trial.
 
     Args:
-        approach: the trial's MAP-Elites approach (`SAIL_APPROACHES`).
+        approach: the trial's MAP-Elites approach (one of `sim.study.SAIL_APPROACHES`,
+            as `TrialSpec` checks).
         mode: "paper" or "legacy".
         n_angles: the trial's crank angles.
         seed: the trial's seed.
         walks: the trial's budget of walks.
-        head_start: a fitted walk model to start from (None: learn from the trial alone).
+        head_start: a fitted walk model to start from, on this linkevo's features
+            (`workers.store.walk_models.load_model` checks); None: learn from the trial alone.
     """
 
     def __init__(
@@ -181,16 +183,6 @@ class Sail:
         walks: int,
         head_start: WalkModel | None = None,
     ) -> None:
-        if approach not in SAIL_APPROACHES:
-            raise ValueError(
-                f"SAIL runs {', '.join(SAIL_APPROACHES)}, not {approach} (its descriptors "
-                "are learned from the archive it fills)"
-            )
-        if head_start is not None and head_start.n_features != len(FEATURE_NAMES):
-            raise ValueError(
-                f"the head start takes {head_start.n_features} features, not "
-                f"{len(FEATURE_NAMES)}: fit a new model"
-            )
         self.approach = approach
         self.mode = mode
         self.n_angles = n_angles

@@ -55,7 +55,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--surrogate",
         nargs="?",
         const="screen",
-        default="",
         choices=("screen", "sail"),
         help="--fitness Fw, a MAP-Elites approach: with the learned walk model, fitted on the "
         "trial's walks as it goes, 'screen' (alone: --surrogate) walks only the candidates "
@@ -64,7 +63,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     parser.add_argument(
         "--walk-model",
-        default="",
         metavar="RUN_ID",
         help="--surrogate sail: start from this walk model of the store (linkevo walkmodel "
         "fit), refitted with the trial's walks",
@@ -244,8 +242,8 @@ def trial_spec(args: argparse.Namespace) -> TrialSpec:
             spec = TrialSpec.walking(
                 args.approach,
                 args.walks,
-                surrogate=args.surrogate,
-                walk_model=args.walk_model,
+                surrogate=args.surrogate or "",
+                walk_model=args.walk_model or "",
                 **settings,
             )
         else:

@@ -43,7 +43,7 @@ def load_model(store: RunStore, run_id: str | None = None) -> tuple[WalkModel, s
         try:
             tags = store.tags(run_id)
         except NotFound as exc:
-            raise NotFound(f"--model {run_id!r}: no such run in the store {store.uri}") from exc
+            raise NotFound(f"walk model {run_id!r}: no such run in the store {store.uri}") from exc
         if tags.get(layout.KIND) != layout.WALK_MODEL:
             raise NotFound(f"run {run_id} is not a walk model (linkevo walkmodel fit makes one)")
     features = store.tags(run_id).get(layout.FEATURES)
