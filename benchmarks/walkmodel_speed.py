@@ -7,7 +7,7 @@ on one core by a walk model fitted on walks of the same kind (its size is what a
 model has; its weights do not change its speed): `sim.robot.walk_features` (each cell's LEGO
 build found by `sim.robot.builds`, the 2-D kernel's simulation of it, its checks and tripod gait)
 plus the ensemble's forward pass, process CPU time, best of 3. In the same run: the builds
-alone, against `sim.robot.lego.whole_module_build` (the exhaustive search `linkevo pull` uses)
+alone, against `sim.robot.lego.closest_build` (every rounding simulated, the closest kept)
 on `--sample` of the cells; and the walk map's cost: `--sample` cells built and walked 10 s
 on both floors (`sim.robot.walk_map.walk_cells`), per cell, times `--cells`.
 Goal: <= 2 s for 10,000 cells, build features included.
@@ -36,7 +36,7 @@ def main() -> None:
     from linkevo.sim import decode, simulate
     from linkevo.sim.linkage.physical import physical_checks
     from linkevo.sim.robot.builds import lego_builds
-    from linkevo.sim.robot.lego import QuantiseError, whole_module_build
+    from linkevo.sim.robot.lego import QuantiseError, closest_build
     from linkevo.sim.robot.walk_features import FEATURE_NAMES, walk_features
     from linkevo.sim.robot.walk_map import CellBatch, walk_cells
 
@@ -66,7 +66,7 @@ def main() -> None:
     start = time.process_time()
     for genome in genomes[: args.sample]:
         with contextlib.suppress(QuantiseError):
-            whole_module_build(genome, "paper")
+            closest_build(genome, "paper")
     plain_per_cell = (time.process_time() - start) / args.sample
 
     sample = genomes[: args.sample]

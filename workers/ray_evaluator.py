@@ -172,12 +172,18 @@ class WalkWorker:
     """Builds and walks a walking trial's candidates; runs as a Ray actor."""
 
     def walk(
-        self, genome: np.ndarray, mode: str, known: frozenset[str], bar: float, robot: Robot
+        self,
+        genome: np.ndarray,
+        mode: str,
+        known: frozenset[str],
+        bar: float,
+        robot: Robot,
+        searched: np.ndarray,
     ) -> tuple[CandidateWalk, str]:
         """Returns the candidate's walk (`sim.robot.walk_fitness.walk_candidate`) and this
         actor's Ray node."""
         node = ray.get_runtime_context().get_node_id()
-        return walk_candidate(genome, mode, known, bar, robot=robot), node
+        return walk_candidate(genome, mode, known, bar, robot=robot, searched=searched), node
 
 
 class ActorWalkers:
@@ -208,15 +214,16 @@ class ActorWalkers:
         known: frozenset[str],
         bars: np.ndarray,
         robot: Robot,
+        searched: np.ndarray,
     ):
         """Starts every candidate's walk now; yields each (walk, node) in order."""
         from ray.util import ActorPool
 
         known_ref = ray.put(known)
         pool = ActorPool(self._actors)
-        items = list(zip(genomes, bars.tolist(), strict=True))
+        items = list(zip(genomes, bars.tolist(), searched, strict=True))
         return pool.map(
-            lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1], robot), items
+            lambda actor, i: actor.walk.remote(i[0], mode, known_ref, i[1], robot, i[2]), items
         )
 
     def close(self) -> None:

@@ -1,10 +1,12 @@
 """Provides `WalkingEvaluator`: a walking trial's evaluator (fitness F_w, `sim.robot.walk_fitness`).
 
 A batch is evaluated as the path fitnesses are (the 2-D kernel gives every candidate its
-foot path and descriptors, and keeps its decoding and motion, which the 2-D checks and the
-walk model's features read: each candidate is decoded and simulated in 2-D once), then
-screened: a candidate that fails the 2-D checks is
-rejected at no walk's cost; the others are built as their LEGO legs and walked, here or on
+foot path and descriptors, and keeps its decoding and motion, which the 2-D checks, the
+LEGO builds and the walk model's features read), then screened: a candidate that fails the
+2-D checks is rejected at no walk's cost; the others are built for the whole batch at once
+(`sim.robot.builds.build_lengths`: each candidate decoded, simulated in 2-D and built once
+a round, for the pre-screen's features and its walk alike) and walked as their LEGO legs,
+here or on
 the trial's evaluator actors (`ActorWalkers`), each candidate a task, so that an actor
 that finishes early takes the next. A leg already walked in the trial is not walked
 again: its rows are reused (the walk is deterministic). The evaluator keeps the trial's
@@ -26,8 +28,9 @@ from linkevo.sim.linkage.evaluating import evaluate_with_motion
 from linkevo.sim.linkage.evaluation import Evaluation
 from linkevo.sim.linkage.genome import validate_genomes
 from linkevo.sim.linkage.physical import physical_checks
+from linkevo.sim.robot.builds import build_lengths, study_rows
 from linkevo.sim.robot.hexapod import Robot
-from linkevo.sim.robot.walk_features import features_of_rows
+from linkevo.sim.robot.walk_features import features_of
 from linkevo.sim.robot.walk_fitness import (
     CandidateWalk,
     floor_losses,
@@ -55,10 +58,11 @@ class Walkers(Protocol):
         known: frozenset[str],
         bars: np.ndarray,
         robot: Robot,
+        searched: np.ndarray,
     ) -> Iterator[tuple[CandidateWalk, str]]:
         """Yields each candidate's walk (`sim.robot.walk_fitness.walk_candidate`, legs in
-        `known` not walked, each with its bar (K,), on `robot`) and
-        where it ran, in order."""
+        `known` not walked, each with its bar (K,) and its build's lengths (K, 15), on
+        `robot`) and where it ran, in order."""
         ...
 
     def close(self) -> None:
@@ -76,10 +80,14 @@ class LocalWalkers:
         known: frozenset[str],
         bars: np.ndarray,
         robot: Robot,
+        searched: np.ndarray,
     ):
         host = socket.gethostname()
-        for genome, bar in zip(genomes, bars, strict=True):
-            yield walk_candidate(genome, mode, known, float(bar), robot=robot), host
+        for genome, bar, lengths in zip(genomes, bars, searched, strict=True):
+            yield (
+                walk_candidate(genome, mode, known, float(bar), robot=robot, searched=lengths),
+                host,
+            )
 
     def close(self) -> None:
         """Nothing to release."""
@@ -159,18 +167,21 @@ class WalkingEvaluator:
         built = np.flatnonzero(checks.buildable & ~reused)
         bars = np.full(len(genomes), np.inf) if bar is None else bar(genomes, base)
         skipped = np.zeros(0, np.int64)
+        rows, here = study_rows(batch, motion, built)
+        searched = build_lengths(rows, here)  # each candidate built once: features and walk
         if self.surrogate is not None:
             self.surrogate.refresh(self.log)
             worth = self.surrogate.worth_walking(
-                lambda: features_of_rows(batch, motion, built), bars[built]
+                lambda: features_of(rows, here, searched), bars[built]
             )
-            built, skipped = built[worth], built[~worth]
+            built, skipped, searched = built[worth], built[~worth], searched[worth]
         if self.sail is not None:  # a SAIL trial never walks past its budget
             left = max(self.sail.walks - self.log.counts["walks"], 0)
             built, skipped = built[:left], np.concatenate([skipped, built[left:]])
+            searched = searched[:left]
         known = self.log.known()
         walks = self.walkers.walk(
-            genomes[built], self.mode, frozenset(known), bars[built], self.robot
+            genomes[built], self.mode, frozenset(known), bars[built], self.robot, searched
         )
 
         def collect() -> Evaluation:

@@ -259,12 +259,16 @@ def leg_recipe(genome: np.ndarray, mode: str = "paper") -> LegRecipe:
     return recipe_and_leg(genome, mode)[0]
 
 
-def recipe_and_leg(genome: np.ndarray, mode: str = "paper") -> tuple[LegRecipe, Leg]:
-    """Returns `leg_recipe`'s recipe and `leg_from_genome`'s leg at once; raises as they do."""
+def recipe_and_leg(
+    genome: np.ndarray, mode: str = "paper", searched: np.ndarray | None = None
+) -> tuple[LegRecipe, Leg]:
+    """Returns `leg_recipe`'s recipe and `leg_from_genome`'s leg at once; raises as they do.
+    `searched` is the build's (15,) lengths where the caller found them for its whole batch
+    (`sim.robot.lego.whole_module_build`)."""
     genome = np.asarray(genome, dtype=np.float64).reshape(1, -1)
     note, parts = "", None
     try:
-        batch = whole_module_build(genome[0], mode)
+        batch = whole_module_build(genome[0], mode, searched)
         coarse = simulate(batch, DEFAULT_ANGLES)
         plan = layer_plan(batch, coarse)
         parts = assign_parts(batch, coarse, plan)

@@ -35,9 +35,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from linkevo.sim.linkage.decoding import LinkageBatch, decode
-from linkevo.sim.linkage.kinematics import Motion, simulate, take_rows
+from linkevo.sim.linkage.kinematics import Motion, simulate
 from linkevo.sim.linkage.physical import physical_checks, quiet_all_nan
-from linkevo.sim.robot.builds import lego_builds
+from linkevo.sim.robot.builds import lego_builds, study_rows
 from linkevo.sim.robot.walk_rows import FLOOR_ORDER, Status, credited_cm
 from linkevo.sim.study import DEFAULT_ANGLES
 
@@ -97,22 +97,22 @@ def walk_features(genomes: np.ndarray, mode: str = "paper") -> np.ndarray:
 
 def features_of_rows(batch: LinkageBatch, motion: Motion, rows: np.ndarray) -> np.ndarray:
     """Returns `walk_features` (len(rows), F) of a batch's `rows` from the batch's own
-    decoding and motion (simulated again only when its crank angles are not the study's)."""
-    batch = take_rows(batch, rows)
-    if motion.valid.shape[1] == DEFAULT_ANGLES:
-        return features_of(batch, take_rows(motion, rows))
-    return features_of(batch, simulate(batch, DEFAULT_ANGLES))
+    decoding and motion (`sim.robot.builds.study_rows`)."""
+    return features_of(*study_rows(batch, motion, rows))
 
 
 @quiet_all_nan
-def features_of(evolved: LinkageBatch, before: Motion) -> np.ndarray:
+def features_of(
+    evolved: LinkageBatch, before: Motion, searched: np.ndarray | None = None
+) -> np.ndarray:
     """Returns `walk_features` of decoded linkages (N) from their motion at the study's
-    `DEFAULT_ANGLES` (a caller that has both, a walking trial's batch, decodes and
-    simulates once)."""
+    `DEFAULT_ANGLES` and, where the caller has them, their builds' (N, 15) lengths
+    (`sim.robot.builds.build_lengths`): a walking trial's round decodes, simulates and
+    builds each candidate once for its features and its walk."""
     n = len(evolved)
     if not n:
         return np.zeros((0, len(FEATURE_NAMES)), np.float32)
-    batch, built = lego_builds(evolved, before)
+    batch, built = lego_builds(evolved, before, searched)
     motion = simulate(batch, DEFAULT_ANGLES)
     checks = physical_checks(batch, motion, rigid=built)
     rows = np.arange(n)

@@ -108,6 +108,7 @@ def walk_candidate(
     bar: float = math.inf,
     seconds: float = SEARCH_SECONDS,
     robot: Robot | None = None,
+    searched: np.ndarray | None = None,
 ) -> CandidateWalk:
     """Builds a candidate's LEGO leg and walks it: carpet, then flat unless it broke there
     or its carpet loss alone is at or above `bar`.
@@ -122,6 +123,8 @@ def walk_candidate(
             floor's is at or above it the second cannot matter and is not walked.
         seconds: each walk's length.
         robot: the robot walked (default: the study's robot).
+        searched: (15,) the build's lengths where the caller found them for its whole
+            batch (`sim.robot.builds.build_lengths`), so the leg is not searched again.
     """
     start = time.perf_counter()
     base = {"cell": -1, "seconds": float(seconds)}
@@ -130,7 +133,7 @@ def walk_candidate(
         return CandidateWalk(stage, key, tuple(rows), time.perf_counter() - start)
 
     try:
-        recipe, leg = recipe_and_leg(genome, mode)
+        recipe, leg = recipe_and_leg(genome, mode, searched)
     except LegError as exc:
         return done(
             Stage.NO_TURN,

@@ -1,6 +1,8 @@
 """Tests `sim.robot.builds`: the whole batch's LEGO builds found by the depth-first search agree
-with `sim.robot.lego.quantise`'s exhaustive one, turn rigidly, and stand in as evolved where none
-is found; `with_lengths` writes lengths as decoding does; the tripod features by hand."""
+with the exhaustive closest rounding (`sim.robot.lego.closest_build`), turn rigidly, stand in
+as evolved where none is found, and are the build every leg is made of (one linkage's
+`whole_module_build`, a walk given its batch's build); `with_lengths` writes lengths as
+decoding does; the tripod features by hand."""
 
 from __future__ import annotations
 
@@ -11,8 +13,9 @@ from linkevo import sim
 from linkevo.sim.linkage.decoding import NODE_KINDS, with_lengths
 from linkevo.sim.linkage.kinematics import simulate
 from linkevo.sim.linkage.physical import max_stretch, physical_checks
-from linkevo.sim.robot.builds import lego_builds
-from linkevo.sim.robot.lego import QuantiseError, whole_module_build
+from linkevo.sim.robot.builds import build_lengths, lego_builds
+from linkevo.sim.robot.leg import recipe_and_leg
+from linkevo.sim.robot.lego import QuantiseError, closest_build, whole_module_build
 from linkevo.sim.robot.walk_features import _tripod
 
 
@@ -30,7 +33,7 @@ def test_the_builds_are_quantises_and_turn_rigidly(turning):
     for i, genome in enumerate(turning):
         k = int(batch.n_beams[i])
         try:
-            exact = whole_module_build(genome).beam_length[0, :k]
+            exact = closest_build(genome).beam_length[0, :k]
         except QuantiseError:
             exact = None
         lengths = built_batch.beam_length[i, :k]
@@ -52,6 +55,23 @@ def test_the_builds_are_quantises_and_turn_rigidly(turning):
     )
     np.testing.assert_allclose(told.max_stretch, measured.max_stretch, rtol=0, atol=1e-9)
     np.testing.assert_array_equal(told.size_modules, measured.size_modules)
+
+
+def test_every_leg_is_built_as_its_batch_is(turning):
+    """One linkage's build is its batch's, and a leg built from the batch's lengths is the
+    leg built from its genome alone (the same key: a walk's cache and `linkevo pull` agree)."""
+    batch = sim.decode(turning[:20])
+    built_batch, built = lego_builds(batch)
+    searched = build_lengths(batch)
+    assert built.all()
+    for i, genome in enumerate(turning[:20]):
+        np.testing.assert_array_equal(
+            whole_module_build(genome).beam_length[0, : batch.n_beams[i]],
+            built_batch.beam_length[i, : batch.n_beams[i]],
+        )
+        alone, _ = recipe_and_leg(genome)
+        given, _ = recipe_and_leg(genome, searched=searched[i])
+        assert given.key == alone.key and given.note == alone.note
 
 
 def test_with_lengths_writes_them_as_decoding_does(turning):
