@@ -9,7 +9,9 @@ For each MAP-Elites approach with F_p, for each of `trials_drawn` trials drawn b
   linkage of each region, the map the paper's builders looked at), among the eight regions
   around the first robot's. By the default rule ("sought") it is the region whose path is
   nearest the first's among those with the change the paper's builders sought for that
-  approach (`SOUGHT`), without looking at any walk; the rule "walked" takes the region
+  approach (`SOUGHT`), without looking at any walk; where no buildable neighbour has
+  that change, the draw has no modified robot (its rows say "no modification possible",
+  and no claim about the modified robot counts it). The rule "walked" takes the region
   whose linkage walks furthest on the flat floor, which builds the simulator's own
   ranking into every "modified against first" comparison.
 Every robot is walked `repeats` × `seconds` on each floor on both robot models (lean and
@@ -29,6 +31,7 @@ import pandas as pd
 
 from linkevo.hardware.config import RobotConfig
 from linkevo.orchestrator.simulated_trials import log_simulated, simulate_source
+from linkevo.orchestrator.table_one_verdicts import NO_MODIFICATION
 from linkevo.sim.errors import LinkevoError
 from linkevo.sim.linkage.linkage_doc import to_document
 from linkevo.sim.robot.hexapod import FLAT, FLOORS, ROBOT_MODELS
@@ -145,8 +148,9 @@ def choose_modified(
     rule: str,
     walk_flat: Callable[[SourceLinkage], dict],
     progress: Callable[[str], None],
-) -> tuple[int, str]:
-    """Returns the index in `near` of the modified robot's region and the rule as applied.
+) -> tuple[int | None, str]:
+    """Returns the index in `near` of the modified robot's region (None: no modification
+    possible) and the rule as applied.
 
     Args:
         start: the first robot's region row (foot_x, foot_y, genome).
@@ -171,11 +175,12 @@ def choose_modified(
         sign * (path_traits(*p, s.document["beams"])[trait] - base[trait]) > 0
         for p, s in zip(paths, sources, strict=True)
     ]
-    pool = [i for i in built if has[i]] or built or list(range(len(near)))
+    pool = [i for i in built if has[i]]
+    if not pool:
+        return None, f"{NO_MODIFICATION}: no buildable neighbour has {words}"
     here = (start["foot_x"], start["foot_y"])
     nearest = min(pool, key=lambda i: path_distance(here, paths[i]))
-    found = "" if any(has[i] for i in built) else f" (no buildable neighbour has {words})"
-    return nearest, f"sought: of the neighbours with {words}, the nearest path{found}"
+    return nearest, f"sought: of the neighbours with {words}, the nearest path"
 
 
 def _builds(genome: list[float], mode: str) -> bool:
@@ -249,13 +254,16 @@ def choose_robots(
                 & (np.abs(regions["col"] - here[1]) <= 1)
                 & ~((regions["row"] == here[0]) & (regions["col"] == here[1]))
             ].reset_index(drop=True)
-            if near.empty:
-                progress("  no neighbouring region is filled: no modified robot")
+            pick, rule = None, f"{NO_MODIFICATION}: no neighbouring region is filled"
+            if not near.empty:
+                sources = _sources(source, near, mode)
+                pick, rule = choose_modified(
+                    approach, start, near, sources, modified, walk_flat, progress
+                )
+            if pick is None:
+                robots.append(StudyRobot(approach, draw, "modified", key, source, here, rule))
+                progress(f"  {rule}")
                 continue
-            sources = _sources(source, near, mode)
-            pick, rule = choose_modified(
-                approach, start, near, sources, modified, walk_flat, progress
-            )
             spot = (int(near.loc[pick, "row"]), int(near.loc[pick, "col"]))
             robots.append(StudyRobot(approach, draw, "modified", key, sources[pick], spot, rule))
             progress(f"  modified robot: cell {sources[pick].cell}, region {spot}, {rule}")
@@ -294,6 +302,9 @@ def predict_table_one(
     )
     rows = []
     for robot in robots:
+        if robot.rule.startswith(NO_MODIFICATION):  # a row per floor and model, no walk
+            rows += [_unmodified_row(robot, f, m) for f in FLOORS for m in ROBOT_MODELS]
+            continue
         for floor in FLOORS:
             for model in ROBOT_MODELS:
                 result, _ = simulate_source(
@@ -337,6 +348,21 @@ def predict_table_one(
                     f"{walked_text(result)}"
                 )
     return pd.DataFrame(rows)
+
+
+def _unmodified_row(robot: StudyRobot, floor: str, model: str) -> dict[str, object]:
+    """Returns the table row of a draw with no modified robot: its map and why, no walk."""
+    return {
+        "approach": robot.approach,
+        "draw": robot.draw,
+        "robot": robot.robot,
+        "floor": floor,
+        "model": model,
+        "trial_key": robot.trial_key,
+        "source_run_id": robot.source.run_id,
+        "region": f"{robot.region[0]},{robot.region[1]}",
+        "rule": robot.rule,
+    }
 
 
 def frailty_text(frailty: dict | None) -> str:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from linkevo.orchestrator.report.load import GridData, read_archive, read_archives
@@ -24,11 +25,11 @@ from linkevo.workers.plots.repertoire import (
 from linkevo.workers.store.tables import bin_columns, fold_bins, space_of
 
 CONVERGENCE_METRICS: tuple[tuple[str, str], ...] = (
-    ("best_loss", "best loss"),
-    ("coverage", "coverage, own grid"),
-    ("qd_score", "QD-score, own grid"),
-    ("common_coverage", "coverage, common grid"),
-    ("common_qd_score", "QD-score, common grid"),
+    ("best_loss", "best loss (lower is better)"),
+    ("coverage", "coverage, own grid (higher is better)"),
+    ("qd_score", "QD-score, own grid (higher is better)"),
+    ("common_coverage", "coverage, common grid (higher is better)"),
+    ("common_qd_score", "QD-score, common grid (higher is better)"),
 )
 MAX_DIMS = 4
 """The most descriptor dimensions a map has (bin_0..bin_3)."""
@@ -154,7 +155,7 @@ def best_loss_figure(grid: GridData) -> ReportFigure:
         ax.set_xticks(positions, ticks)
         ax.set_xlim(0.4, len(approaches) + 0.6)
         ax.set_title(label(fitness))
-        ax.set_ylabel("best loss")
+        ax.set_ylabel("best loss (lower is better)")
         ax.grid(axis="y", alpha=0.3)
     fig.suptitle(study_title(grid))
     return ReportFigure(
@@ -162,7 +163,8 @@ def best_loss_figure(grid: GridData) -> ReportFigure:
         title="Best loss per trial",
         caption=(
             "Distribution of the best loss found in each finished trial, per approach and "
-            "fitness (box: quartiles, whiskers: 1.5 IQR, points: trials). n counts finished "
+            "fitness (lower is better; box: quartiles, whiskers: 1.5 IQR, points: trials). n "
+            "counts finished "
             "trials; failed, killed or missing trials are named under the approach."
         ),
         figure=fig,
@@ -222,13 +224,12 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
                 interpolation="nearest",
                 aspect="equal",
             )
-            cells = f"{int(np.isfinite(image).sum()):,} cells filled"
-            if approach in LEARNED:
-                own = done.coverage[(done.approach == approach) & (done.fitness == fitness)]
-                cells = (
-                    f"POOLED over {own.size} learned grids,\n{cells}; each trial "
-                    f"{own.median():.2f} of its own"
-                )
+            own = done.coverage[(done.approach == approach) & (done.fitness == fitness)]
+            grids = "learned grids" if approach in LEARNED else "trials"
+            cells = (
+                f"POOLED over {own.size} {grids},\n{int(np.isfinite(image).sum()):,} cells "
+                f"filled; each trial {own.median():.2f} of its own"
+            )
             ax.set_title(
                 f"{label(approach)}, {label(fitness)}: {cells}\n"
                 f"{_trial_count(grid, approach, fitness)}"
@@ -253,11 +254,12 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
         title="Repertoire maps",
         caption=(
             "Best loss found in each cell over all finished trials of each MAP-Elites "
-            "approach; blank cells were never filled. 4-D maps are folded to 100 × 100: "
+            "approach (lower is better); blank cells were never filled. Every panel pools "
+            "its trials (POOLED) and gives a trial's median coverage of its own grid beside "
+            "the pooled count. 4-D maps are folded to 100 × 100: "
             "row = b0·10 + b2, column = b1·10 + b3, so tick labels give the outer bins and "
             "each 10 × 10 block spans the inner pair. MAP-AU learns its grid anew in every "
-            "trial, so its pooled map lays differently defined cells over each other: its "
-            "panel is marked POOLED and gives the per-trial coverage beside the pooled count."
+            "trial, so its pooled map lays differently defined cells over each other."
         ),
         figure=fig,
     )
@@ -375,6 +377,8 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
         axes[-1, col].set_xlabel("evaluations")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     if handles:
+        band = Patch(color="0.5", alpha=0.3, label="band: 25th-75th percentile of the trials")
+        handles, labels = [*handles, band], [*labels, band.get_label()]
         fig.legend(handles, labels, loc="outside lower center", ncols=min(len(handles), 4))
     fig.suptitle(study_title(grid))
     return ReportFigure(

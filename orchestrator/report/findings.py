@@ -105,7 +105,7 @@ def check_findings(
         versus(
             pairwise_tests(mine, "stagnation", higher_is_better=True),
             "6",
-            "With F_p, the EA converged to a local optimum (Discussion).",
+            "With F_p, the EA seemed to converge to a local optimum (Discussion).",
             "a larger median share of the budget spent after the last improvement of the "
             f"best loss than every other approach; {RULE}",
             "Fp",
@@ -121,7 +121,8 @@ def check_findings(
             versus(
                 diversity,
                 number,
-                f"With {label(fitness)}, {approach} created the most diverse paths (Results).",
+                f"With {label(fitness)}, {approach} seems to have created more diverse paths "
+                "(Results; judged: more diverse than each other approach's).",
                 "a higher median path diversity (`sim.linkage.path_diversity`) than every other "
                 f"approach; {RULE}",
                 fitness,

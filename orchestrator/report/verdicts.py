@@ -89,11 +89,12 @@ def judge(row: pd.Series, lower: bool = True) -> str:
     """Returns the verdict (`RULE`) on "approach_a does better than approach_b" from a
     test row: better is a lower measure when `lower`, else a higher one."""
     side = (lambda a: a < 0.5) if lower else (lambda a: a > 0.5)
+    other = (lambda a: a > 0.5) if lower else (lambda a: a < 0.5)
     significant = bool(row.p_holm < ALPHA)
     if significant and side(row.a12) and side(row.a12_high if lower else row.a12_low):
         return REPRODUCED
-    if significant and not side(row.a12) and not side(row.a12_low if lower else row.a12_high):
-        return CONTRADICTED if row.a12 != 0.5 else NOT_REPRODUCED
+    if significant and other(row.a12) and other(row.a12_low if lower else row.a12_high):
+        return CONTRADICTED  # the interval excludes 0.5 on the other side
     return DIRECTION_ONLY if side(row.a12) else NOT_REPRODUCED
 
 

@@ -218,7 +218,13 @@ def test_each_figure_has_its_panels_and_labels(loaded):
     assert titles == [f"{m}, {f}" for m in measures for f in ("F_p", "F_sl")]
     assert [ax.get_xlabel() for ax in conv.axes[-2:]] == ["evaluations"] * 2
     legend = [t.get_text() for t in conv.legends[0].get_texts()]
-    assert legend == ["EA", "NSGA-II", "MAP-WH", "MAP-ST"]
+    assert legend == [
+        "EA",
+        "NSGA-II",
+        "MAP-WH",
+        "MAP-ST",
+        "band: 25th-75th percentile of the trials",
+    ]
     conv.canvas.draw()
     ticks = [t.get_text() for t in conv.axes[-1].get_xticklabels() if t.get_text()]
     assert ticks and all(t == "0" or t.endswith("k") for t in ticks), ticks
@@ -511,6 +517,10 @@ def test_every_report_figure_is_readable_at_page_width(loaded):
     maps = next(m for m in made if m.name == "repertoire_maps")
     titles = [ax.get_title() for ax in maps.figure.axes if ax.get_title()]
     assert any("MAP-AU" in t and "POOLED" in t for t in titles) == ("MAP-AU" in SPEC.approaches)
+    # every map pools its trials and says so, with a trial's own coverage beside it
+    assert titles and all("POOLED over" in t and "each trial" in t for t in titles)
+    boxes = next(m for m in made if m.name == "best_loss")
+    assert all("lower is better" in ax.get_ylabel() for ax in boxes.figure.axes if ax.get_ylabel())
 
 
 def test_a_walking_grids_winners_are_tabled_with_the_ones_to_doubt_named():

@@ -114,6 +114,9 @@ def test_one_rule_judges_every_claim():
     assert judge(row(0.60, 0.35, 0.85, 0.50)) == NOT_REPRODUCED
     assert judge(row(0.90, 0.75, 1.00, 0.01)) == CONTRADICTED
     assert judge(row(0.90, 0.75, 1.00, 0.01), lower=False) == REPRODUCED
+    # an interval that only touches 0.5 does not exclude it: the reverse is not shown
+    assert judge(row(0.80, 0.50, 1.00, 0.01)) == NOT_REPRODUCED
+    assert judge(row(0.20, 0.00, 0.50, 0.01), lower=False) == NOT_REPRODUCED
     assert similar(row(0.50, 0.35, 0.66, 0.90)) == REPRODUCED
     assert similar(row(0.50, 0.20, 0.80, 0.90)) == NOT_SHOWN  # too wide to say
     assert similar(row(0.05, 0.00, 0.15, 0.01)) == NOT_REPRODUCED
