@@ -19,10 +19,12 @@ map that the trial never walked, drawn at random, are built and walked now with 
 walking fitness's walk on both floors: Spearman of predicted against walked distance per
 floor (cells that walked there without breaking), how many real parts cannot build, and,
 of the cells predicted to walk at least 50 cm on both floors (and of those also predicted
-not to break, p_break < 0.5 on each), the share that do.
+not to break, p_break < 0.5 on each), the share that do and how many real parts build.
 
 Run: `.venv/bin/python benchmarks/sail.py --work DIR [--walks 2000] [--sail-walks 500]
-[--seeds 5] [--walk-model RUN_ID --tracking-uri URI] [--arms plain,screen,sail,sail-head]`.
+[--seeds 5] [--walk-model RUN_ID --tracking-uri URI] [--arms plain,screen,sail,sail-head]
+[--tables docs/results]` (the last writes every trial's row, `sail_trials.csv`, and each SAIL
+arm's honesty, `sail_honesty.csv`).
 """
 
 from __future__ import annotations
@@ -124,8 +126,10 @@ def honesty(folders: list[Path], sample: int, seed: int) -> dict[str, float]:
     kept = (walked[list(FLOOR_ORDER)].fillna(-np.inf) >= WALKER_CM).all(axis=1)
     figures["far"] = float(far.sum())
     figures["far_kept"] = float((far & kept).sum())
+    built = (walked["stage"] == str(Stage.WALKED)).to_numpy()
     figures["promised"] = float((far & sound).sum())
     figures["promised_kept"] = float((far & sound & kept).sum())
+    figures["promised_built"] = float((far & sound & built).sum())
     return figures
 
 
@@ -139,6 +143,9 @@ def main() -> None:
     parser.add_argument("--walk-model", default="", help="the head start's run id")
     parser.add_argument("--tracking-uri", default=None, help="the head start's store")
     parser.add_argument("--arms", default="plain,screen,sail,sail-head")
+    parser.add_argument(
+        "--tables", type=Path, default=None, help="write sail_trials.csv and sail_honesty.csv here"
+    )
     args = parser.parse_args()
     store = ["--tracking-uri", args.tracking_uri] if args.tracking_uri else []
     arms = {
@@ -168,6 +175,7 @@ def main() -> None:
         if ("plain", seed) in metrics
     }
     print(f"plain arm's final walking QD-score per seed: {targets}")
+    trials, honest = [], []
     for arm in chosen:
         rows = []
         for seed in range(1, args.seeds + 1):
@@ -179,6 +187,7 @@ def main() -> None:
             row |= timings[(arm, seed)]
             rows.append(row)
         table = pd.DataFrame(rows)
+        trials.append(table.assign(arm=arm))
         print(f"\n## {arm}")
         print(table.to_string(index=False, float_format=lambda v: f"{v:.1f}"))
         print(
@@ -190,6 +199,7 @@ def main() -> None:
         if arm.startswith("sail"):
             folders = [args.work / f"{arm}-{s}" for s in range(1, args.seeds + 1)]
             figures = honesty(folders, args.sample, seed=len(arm))
+            honest.append({"arm": arm, **figures})
             print(
                 f"prediction map honesty: {figures['cells']:.0f} never-walked cells walked now; "
                 + ", ".join(
@@ -200,8 +210,13 @@ def main() -> None:
                 + f"; real parts build no leg for {figures['no_build']:.0f}; predicted >= "
                 f"{WALKER_CM:.0f} cm on both floors: {figures['far']:.0f} (of which "
                 f"{figures['far_kept']:.0f} walk it), and without breaking: "
-                f"{figures['promised']:.0f} (of which {figures['promised_kept']:.0f} walk it)"
+                f"{figures['promised']:.0f} (of which {figures['promised_kept']:.0f} walk it; "
+                f"real parts build {figures['promised_built']:.0f})"
             )
+    if args.tables is not None:
+        args.tables.mkdir(parents=True, exist_ok=True)
+        pd.concat(trials).to_csv(args.tables / "sail_trials.csv", index=False)
+        pd.DataFrame(honest).to_csv(args.tables / "sail_honesty.csv", index=False)
 
 
 if __name__ == "__main__":
