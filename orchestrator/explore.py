@@ -188,8 +188,8 @@ def real_parts(batch: LinkageBatch, motion: Motion, rows: np.ndarray) -> dict[in
     `motion`) that turn, their real parts as the
     page's r: {"p": [[part number, name, count], ...] for one leg, "j": 1 when a bar is
     built of joined beams} or {"x": why no real parts build it}. The build is the batch
-    build (`sim.robot.builds`: the rounding `linkevo pull` finds for 94-99.5 % of cells),
-    its layer plan and parts (`sim.robot.parts`)."""
+    build (`sim.robot.builds`: the rounding `linkevo pull` builds), its layer plan and
+    parts (`sim.robot.parts`)."""
     from linkevo.sim.robot.builds import lego_builds
     from linkevo.sim.robot.layers import LayerError, layer_plan
     from linkevo.sim.robot.parts import PartsError, assign_parts, catalogue
