@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numpy as np
 import pandas as pd
@@ -47,7 +48,16 @@ from linkevo.sim.study import (
 HIGH_CORRELATION = 0.7
 """|rho| from which a correlation is called high (Hinkle, Wiersma and Jurs, "Applied
 Statistics for the Behavioral Sciences": 0.7-0.9 high, above 0.9 very high)."""
-MEASURES: tuple[str, ...] = ("stagnation", "descriptor_correlation", "front_size")
+HIGH_DEPENDENCE = 3 / math.pi * math.asin((1 + HIGH_CORRELATION**2) / 2) - 0.5
+"""Chatterjee's xi from which a dependence is called high: the xi of a bivariate normal
+pair at |rho| = `HIGH_CORRELATION` (its limit (3/pi) asin((1 + rho^2) / 2) - 1/2, about
+0.30), so that a peaked dependence as strong as a high monotone one reads high."""
+MEASURES: tuple[str, ...] = (
+    "stagnation",
+    "descriptor_correlation",
+    "descriptor_dependence",
+    "front_size",
+)
 """The per-trial measures `trial_measures` adds; `trials.csv` of a report carries them."""
 
 
@@ -205,23 +215,28 @@ def _filled_differently(common: pd.DataFrame, maps: list[str], fitness: str) -> 
 
 def _highly_correlated(measures: pd.DataFrame, fitness: str) -> Finding:
     """Returns the verdict on "MAP-WH's dimensions are highly correlated with the
-    fitness": the median over MAP-WH's trials of its largest |Spearman rho| between a
-    descriptor and the elites' loss, against `HIGH_CORRELATION`."""
+    fitness": over MAP-WH's trials, the median of the largest |Spearman rho| between a
+    descriptor and the elites' loss against `HIGH_CORRELATION`, and the median of the
+    largest Chatterjee xi (which sees a peaked dependence, "a path of a certain size")
+    against `HIGH_DEPENDENCE`; the stronger of the two verdicts (a trials table without
+    xi, from before it was measured, is judged on rho alone and says so)."""
     claim = (
         f"With {label(fitness)}, the width and height, MAP-WH's dimensions, are highly "
         "correlated with the fitness (Prototyping, Discussion)."
     )
     rule = (
-        "the median over MAP-WH's trials of the largest |Spearman rho| between a descriptor "
-        f"and the elites' loss is high (above {HIGH_CORRELATION}); {RULE}"
+        "over MAP-WH's trials, the median of the largest |Spearman rho| between a descriptor "
+        f"and the elites' loss is high (above {HIGH_CORRELATION}), or the median of the "
+        f"largest Chatterjee xi of the loss on a descriptor is (above {HIGH_DEPENDENCE:.2f}, "
+        f"the xi of a normal pair at rho {HIGH_CORRELATION}); the stronger verdict; {RULE}"
     )
-    rhos = measures.descriptor_correlation[
-        (measures.approach == "MAP-WH") & (measures.fitness == fitness)
-    ].dropna()
+    mine = measures[(measures.approach == "MAP-WH") & (measures.fitness == fitness)]
+    rhos = mine.descriptor_correlation.dropna()
     if rhos.size < 2:
         return Finding("12", fitness, claim, rule, NOT_TESTABLE, "fewer than two MAP-WH trials")
     median = float(rhos.median())
     low, high = median_interval(rhos.to_numpy())
+    verdicts = [above(median, low, high, HIGH_CORRELATION)]
     others = (
         measures[
             measures.approach.map(is_map_elites)
@@ -235,7 +250,16 @@ def _highly_correlated(measures: pd.DataFrame, fitness: str) -> Finding:
         f"MAP-WH median |rho| {median:.2f} [{low:.2f}, {high:.2f}] over {rhos.size} trials"
         + "".join(f"; {a} {m:.2f}" for a, m in others.dropna().items())
     )
-    return Finding("12", fitness, claim, rule, above(median, low, high, HIGH_CORRELATION), evidence)
+    xis = mine.get("descriptor_dependence", pd.Series(dtype=float)).dropna()
+    if xis.size >= 2:
+        xi = float(xis.median())
+        xi_low, xi_high = median_interval(xis.to_numpy())
+        verdicts.append(above(xi, xi_low, xi_high, HIGH_DEPENDENCE))
+        evidence += f"; MAP-WH median xi {xi:.2f} [{xi_low:.2f}, {xi_high:.2f}]"
+    else:
+        evidence += "; xi not measured in this trials table"
+    strongest = min(verdicts, key=STRENGTH.index)
+    return Finding("12", fitness, claim, rule, strongest, evidence)
 
 
 def _trade_off(measures: pd.DataFrame, nsga: str) -> Finding:

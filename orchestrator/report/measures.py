@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
-from scipy.stats import spearmanr
+from scipy.stats import chatterjeexi, spearmanr
 
 from linkevo.algorithms.pareto import non_dominated_ranks
 from linkevo.orchestrator.report.load import GridData, read_archive
@@ -39,6 +39,19 @@ def descriptor_correlation(archive: pd.DataFrame) -> float:
     return float(np.nanmax(rhos)) if np.isfinite(rhos).any() else np.nan
 
 
+def descriptor_dependence(archive: pd.DataFrame) -> float:
+    """Returns the largest Chatterjee xi of a repertoire's elites' loss on one of its
+    descriptors (scipy's `chatterjeexi`): 0 when the loss does not depend on it, 1 when
+    the loss is a function of it, whether monotone or peaked (a path of a certain size
+    scores best), where Spearman's rho sees only the monotone part."""
+    desc = [c for c in archive.columns if c.startswith("desc_")]
+    finite = archive[np.isfinite(archive.loss)]
+    if len(finite) < 3 or not desc:
+        return np.nan
+    xis = [chatterjeexi(finite[c], finite.loss).statistic for c in desc]
+    return float(np.nanmax(xis)) if np.isfinite(xis).any() else np.nan
+
+
 def front_size(archive: pd.DataFrame) -> float:
     """Returns the number of distinct mutually non-dominated (loss_0, loss_1) points of a
     two-objective population."""
@@ -48,28 +61,31 @@ def front_size(archive: pd.DataFrame) -> float:
 
 
 def trial_measures(grid: GridData) -> pd.DataFrame:
-    """Returns the finished trials (`GridData.finished`) with three measures added:
-    stagnation (every approach), descriptor_correlation (MAP-Elites repertoires) and
-    front_size (NSGA-II populations); NaN where a measure does not apply or its data is
-    missing."""
+    """Returns the finished trials (`GridData.finished`) with four measures added:
+    stagnation (every approach), descriptor_correlation and descriptor_dependence
+    (MAP-Elites repertoires) and front_size (NSGA-II populations); NaN where a measure does
+    not apply or its data is missing."""
     trials = grid.finished().copy()
     history = grid.history
     trials["stagnation"] = [
         stagnation(history[history.trial_key == key]) for key in trials.trial_key
     ]
-    correlation, fronts = [], []
+    correlation, dependence, fronts = [], [], []
     for trial in trials.itertuples():
         has = isinstance(trial.archive, str)
         if has and is_map_elites(trial.approach):
-            columns = ["loss", *(f"desc_{d}" for d in range(4))]
-            correlation.append(descriptor_correlation(read_archive(trial.archive, columns)))
+            archive = read_archive(trial.archive, ["loss", *(f"desc_{d}" for d in range(4))])
+            correlation.append(descriptor_correlation(archive))
+            dependence.append(descriptor_dependence(archive))
         else:
             correlation.append(np.nan)
+            dependence.append(np.nan)
         if has and is_pareto(trial.approach):
             fronts.append(front_size(read_archive(trial.archive, ["loss_0", "loss_1"])))
         else:
             fronts.append(np.nan)
     trials["descriptor_correlation"] = correlation
+    trials["descriptor_dependence"] = dependence
     trials["front_size"] = fronts
     return trials
 

@@ -144,3 +144,41 @@ def test_thousands_ticks_never_repeat():
     ax.figure.canvas.draw()
     labels = [t.get_text() for t in ax.get_xticklabels()]
     assert labels == ["0", "0.5k", "1k", "1.5k", "2k"]
+
+
+def test_claim_12_sees_a_peaked_dependence_that_spearman_misses():
+    """A loss that is best at one path size (a peak) has no monotone trend: Spearman's rho
+    is near 0, Chatterjee's xi near 1, and claim 12 reads high on the stronger of the two."""
+    from linkevo.orchestrator.report.findings import (
+        HIGH_DEPENDENCE,
+        _highly_correlated,
+    )
+    from linkevo.orchestrator.report.measures import (
+        descriptor_correlation,
+        descriptor_dependence,
+    )
+
+    rng = np.random.default_rng(0)
+    archives = []
+    for _ in range(10):
+        width = rng.uniform(0, 1, 400)
+        archives.append(
+            pd.DataFrame({"loss": (width - 0.5) ** 2, "desc_0": width, "desc_1": rng.random(400)})
+        )
+    rho = [descriptor_correlation(a) for a in archives]
+    xi = [descriptor_dependence(a) for a in archives]
+    assert max(rho) < 0.2 and min(xi) > 0.9 > HIGH_DEPENDENCE
+    trials = pd.DataFrame(
+        {
+            "approach": "MAP-WH",
+            "fitness": "Fp",
+            "descriptor_correlation": rho,
+            "descriptor_dependence": xi,
+        }
+    )
+    peaked = _highly_correlated(trials, "Fp")
+    assert peaked.verdict == "reproduced" and "median xi" in peaked.evidence
+    rho_only = _highly_correlated(trials.drop(columns="descriptor_dependence"), "Fp")
+    assert rho_only.verdict == "contradicted"
+    assert "xi not measured" in rho_only.evidence
+    assert HIGH_DEPENDENCE == pytest.approx(0.30, abs=0.01)
