@@ -128,3 +128,137 @@ def test_the_smallest_separation_shown_is_the_one_stated():
     stated = re.search(r"shown only near complete separation, at A12 (\d\.\d\d) or beyond", WALKING)
     assert stated and float(stated.group(1)) == pytest.approx(1 - nearest)
     assert "only a complete separation" not in WALKING
+
+
+TABLE_ONE = section("Prototyping, predicted: Table I on the simulated robot")
+PREDICTED = pd.read_csv(RESULTS / "paper" / "table1_predicted.csv")
+VERDICTS = pd.read_csv(RESULTS / "paper" / "table1_verdicts.csv")
+PAPER_CM = {
+    ("MAP-WH", "first"): (73.6, 63.6),
+    ("MAP-LIS", "modified"): (40.4, 48.0),
+    ("MAP-ST", "first"): (39.4, 39.6),
+    ("MAP-ST", "modified"): (77.6, 39.0),
+    ("MAP-AU", "first"): (61.8, 59.4),
+    ("MAP-AU", "modified"): (51.0, 50.0),
+}
+"""The paper's Table I: the six robots that walked, (flat, carpet) cm in 10 s."""
+
+
+def robot_row(approach: str, robot: str) -> str:
+    """The Table I section's row of one robot, from table1_predicted.csv: the median distance
+    per floor (lean, full in brackets, over the draws with one), the draws that walk on
+    both floors, and the draws with no modification possible."""
+    rows = PREDICTED[(PREDICTED.approach == approach) & (PREDICTED.robot == robot)]
+    none = rows.rule.astype(str).str.startswith("no modification possible")
+    built = rows[~none]
+    cells = [approach, robot]
+    for floor in ("flat", "carpet"):
+        medians = []
+        for model in ("lean", "full"):
+            cm = pd.to_numeric(
+                built[(built.floor == floor) & (built.model == model)].mean_distance_cm,
+                errors="coerce",
+            ).dropna()
+            medians.append(f"{cm.median():.1f}" if len(cm) else "none")
+        cells.append(f"{medians[0]} ({medians[1]})")
+    walking = []
+    for model in ("lean", "full"):
+        mine = built[built.model == model]
+        walks = ~mine.breaks.astype(str).eq("True") & (
+            pd.to_numeric(mine.mean_distance_cm, errors="coerce").fillna(-np.inf) > 10.0
+        )
+        both = walks.groupby(mine.draw).all()
+        walking.append(int(both.sum()))
+    draws = built.draw.nunique()
+    cells.append(f"{walking[0]} ({walking[1]}) of {draws}")
+    cells.append(str(rows[none].draw.nunique()))
+    paper = PAPER_CM.get((approach, robot))
+    cells.append(f"{paper[0]} / {paper[1]}" if paper else "did not walk")
+    return "| " + " | ".join(cells) + " |"
+
+
+def test_the_table_one_rows_are_the_predictions():
+    for approach in ("MAP-WH", "MAP-LIS", "MAP-ST", "MAP-AU"):
+        for robot in ("first", "modified"):
+            assert robot_row(approach, robot) in TABLE_ONE, robot_row(approach, robot)
+
+
+def verdict_row(row: pd.Series) -> str:
+    counts = [re.findall(r"(\d+ of \d+) draws", row[f"evidence_{m}"]) for m in ("lean", "full")]
+    said = "; ".join(counts[0]) + (
+        f" (full: {'; '.join(counts[1])})" if counts[1] != counts[0] else ""
+    )
+    return f"| {row.claim} | {row.verdict_lean} | {row.verdict_full} | {said} |"
+
+
+def test_the_table_one_verdicts_are_the_csvs():
+    for _, row in VERDICTS.iterrows():
+        assert verdict_row(row) in TABLE_ONE, verdict_row(row)
+
+
+def test_the_table_one_ratios_to_the_paper_are_the_medians():
+    """ "N to M times as far": the simulated medians (lean, both floors) of the robots the
+    paper saw walk, over the paper's own distances."""
+    ratios = []
+    for (approach, robot), paper in PAPER_CM.items():
+        rows = PREDICTED[
+            (PREDICTED.approach == approach)
+            & (PREDICTED.robot == robot)
+            & (PREDICTED.model == "lean")
+        ]
+        for floor, cm in zip(("flat", "carpet"), paper, strict=True):
+            sim = pd.to_numeric(rows[rows.floor == floor].mean_distance_cm, errors="coerce")
+            if sim.notna().any():
+                ratios.append(sim.median() / cm)
+    stated = re.search(r"go (\d\.\d) to (\d\.\d) times\s+as far", TABLE_ONE)
+    assert stated, "the section states the ratio to the paper's distances"
+    assert (float(stated.group(1)), float(stated.group(2))) == (
+        round(min(ratios), 1),
+        round(max(ratios), 1),
+    )
+
+
+def test_one_grid_is_named_for_table_one():
+    named = set(re.findall(r"`([0-9a-f]{12})`", TABLE_ONE))
+    assert len(named) == 1
+    elsewhere = re.findall(r"`([0-9a-f]{12})` for\s+Table I", DOC)
+    assert elsewhere and set(elsewhere) == named
+
+
+SAIL_ARMS = {
+    "plain": "plain",
+    "screen": "screen",
+    "sail": "SAIL",
+    "sail-head": "SAIL, head start",
+}
+"""benchmarks/sail.py's arms, as the SAIL table names them."""
+
+
+def sail_row(arm: str) -> str:
+    """The SAIL table's row of one arm, from sail_trials.csv: medians (ranges) over its
+    trials of the walking QD-score at 200, 500 and 2,000 walks, the walks to reach the
+    plain arm's final QD-score of the same seed (how many reach it), and a trial's CPU."""
+    trials = pd.read_csv(RESULTS / "sail_trials.csv")
+    mine = trials[trials.arm == arm]
+    cells = [SAIL_ARMS[arm], str(len(mine))]
+    for n in (200, 500, 2000):
+        values = mine[f"qd@{n}"].dropna()
+        cells.append(
+            f"{values.median():,.0f} ({values.min():,.0f}–{values.max():,.0f})"
+            if len(values)
+            else "–"
+        )
+    reach = mine.to_reach_plain.dropna()
+    cells.append(
+        f"{reach.median():,.0f} ({len(reach)} of {len(mine)})"
+        if len(reach)
+        else f"0 of {len(mine)}"
+    )
+    cells.append(f"{mine.cpu_s.median() / 60:.1f}")
+    return "| " + " | ".join(cells) + " |"
+
+
+def test_the_sail_table_is_the_benchmarks_trials():
+    sail = section("The search in the model (SAIL)", "### ")
+    for arm in SAIL_ARMS:
+        assert sail_row(arm) in sail, sail_row(arm)
