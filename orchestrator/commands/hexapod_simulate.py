@@ -53,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
             "By the paper's protocol, for each MAP-Elites approach with F_p and each of K "
             "trials drawn by a seed: the first robot (the drawn trial's best linkage) and a "
             "modified robot from its 5 × 5 downsampled map (the neighbouring region nearest "
-            "the first's path with the change the paper's builders sought), each walked on "
+            "the first's path with the change the paper's builders sought; none, 'no "
+            "modification possible', where no buildable neighbour has it), each walked on "
             "both floors on both robot models and logged as simulated field trials; then the "
             "paper's prototyping claims judged over the draws (docs/results.md)."
         ),
