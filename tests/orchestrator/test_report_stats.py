@@ -181,4 +181,4 @@ def test_claim_12_sees_a_peaked_dependence_that_spearman_misses():
     rho_only = _highly_correlated(trials.drop(columns="descriptor_dependence"), "Fp")
     assert rho_only.verdict == "contradicted"
     assert "xi not measured" in rho_only.evidence
-    assert HIGH_DEPENDENCE == pytest.approx(0.30, abs=0.01)
+    assert pytest.approx(0.30, abs=0.01) == HIGH_DEPENDENCE

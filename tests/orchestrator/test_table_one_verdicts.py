@@ -100,7 +100,8 @@ def test_a_draw_with_no_modification_possible_is_counted_apart():
 def test_similar_speeds_are_within_the_same_speed_band(first_flat, first_carpet, same):
     distances = {**PAPER, ("MAP-AU", "first"): (first_flat, first_carpet)}
     verdicts = judge_prototyping(table(DEFAULT_DRAWS, distances)).set_index("claim")
-    assert verdicts.loc["The MAP-AU first robot moved similarly on both floors"].verdict_lean == same
+    similar = verdicts.loc["The MAP-AU first robot moved similarly on both floors"]
+    assert similar.verdict_lean == same
 
 
 def test_every_approach_of_the_table_is_one_the_study_builds_from():
