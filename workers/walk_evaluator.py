@@ -6,8 +6,7 @@ LEGO builds and the walk model's features read), then screened: a candidate that
 2-D checks is rejected at no walk's cost; the others are built for the whole batch at once
 (`sim.robot.builds.build_lengths`: each candidate decoded, simulated in 2-D and built once
 a round, for the pre-screen's features and its walk alike) and walked as their LEGO legs,
-here or on
-the trial's evaluator actors (`ActorWalkers`), each candidate a task, so that an actor
+here or on the trial's evaluator actors (`ActorWalkers`), each candidate a task, so that an actor
 that finishes early takes the next. A leg already walked in the trial is not walked
 again: its rows are reused (the walk is deterministic). The evaluator keeps the trial's
 walk log (`workers.walk_log.WalkLog`: every candidate it built, with its rows, the seconds
