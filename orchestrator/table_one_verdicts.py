@@ -393,7 +393,9 @@ def judge_prototyping(table: pd.DataFrame) -> pd.DataFrame:
         for model in ROBOT_MODELS:
             mine = table[table.model == model]
             found = [
-                part.judge(draws(mine, part.approach), draws(mine, part.versus))
+                part.judge(
+                    draws(mine, part.approach), draws(mine, part.versus) if part.versus else None
+                )
                 for part in claim.parts
                 if (mine.approach == part.approach).any()
                 and (not part.versus or (mine.approach == part.versus).any())

@@ -95,7 +95,10 @@ def quantise(
     Raises:
         QuantiseError: when no rounding turns fully without stretching a beam.
     """
-    found = _closest_rounding(genome, mode, n_angles, chosen=_searched(genome, mode, n_angles))
+    chosen = None
+    if n_angles == DEFAULT_ANGLES:
+        chosen = _searched(decode(np.asarray(genome, dtype=np.float64).reshape(1, -1), mode))
+    found = _closest_rounding(genome, mode, n_angles, chosen=chosen)
     seen = found.here.valid[0]
     x0, y0 = _foot_path(found.here, 0)
     x, y = _foot_path(found.motion, 0)
@@ -133,8 +136,9 @@ def whole_module_build(
     Raises:
         QuantiseError: when no rounding turns fully with rigid beams.
     """
-    chosen = _searched(genome, mode, DEFAULT_ANGLES, searched)
-    return _closest_rounding(genome, mode, DEFAULT_ANGLES, False, chosen).batch
+    base = decode(np.asarray(genome, dtype=np.float64).reshape(1, -1), mode)
+    chosen = _searched(base, searched)
+    return closest_build(genome, mode) if chosen is None else _with_lengths(base, chosen[None])
 
 
 def closest_build(genome: np.ndarray, mode: str = "paper") -> LinkageBatch:
@@ -147,17 +151,12 @@ def closest_build(genome: np.ndarray, mode: str = "paper") -> LinkageBatch:
     return _closest_rounding(genome, mode, DEFAULT_ANGLES, count_feasible=False).batch
 
 
-def _searched(
-    genome: np.ndarray, mode: str, n_angles: int, searched: np.ndarray | None = None
-) -> np.ndarray | None:
-    """Returns (B,) int64 the depth-first search's build lengths of the linkage's B beams
-    (`searched`, where given), or None where it found none or the turn is not the
-    study's `DEFAULT_ANGLES`."""
-    if n_angles != DEFAULT_ANGLES:
-        return None
-    genome = np.asarray(genome, dtype=np.float64).reshape(1, -1)
+def _searched(base: LinkageBatch, searched: np.ndarray | None = None) -> np.ndarray | None:
+    """Returns (B,) int64 the depth-first search's build lengths of one decoded linkage's B
+    beams (`searched`, its row of `build_lengths`, where the caller has it), or None
+    where the search found none."""
     if searched is None:
-        searched = build_lengths(decode(genome, mode))[0]
+        searched = build_lengths(base)[0]
     n_beams = int(np.count_nonzero(searched > 0))
     return searched[:n_beams].astype(np.int64) if n_beams else None
 
@@ -186,24 +185,22 @@ def _closest_rounding(
     chosen: np.ndarray | None = None,
 ) -> _Rounding:
     """Returns the whole-module rounding of the linkage that turns with rigid beams and
-    keeps the foot path closest (`QuantiseError` when none does), or the `chosen` lengths
-    (B,) where given (a rounding known to turn with rigid beams).
+    keeps the foot path closest (`QuantiseError` when none does), or with the search's
+    counts the `chosen` lengths (B,) where given (a rounding known to turn with rigid
+    beams).
 
     Every rounding is simulated at `COARSE_ANGLES` of the turn's crank angles: one that
     fails at any of them cannot turn, and the others are ranked by their foot path's mean
     distance from the original's there (ties in product order). In that order, chunk by
     chunk, they are simulated over the whole turn, and the first that turns with rigid beams
-    is the one; only `count_feasible` simulates them all, to count the rigid ones, and
-    only it searches at all when the rounding is `chosen`."""
+    is the one; only `count_feasible` simulates them all, to count the rigid ones."""
     base = decode(np.asarray(genome, dtype=np.float64).reshape(1, -1), mode)
     here = simulate(base, n_angles)
     n_beams = int(base.n_beams[0])
     original = base.beam_length[0, :n_beams].copy()
     options = [_roundings(length) for length in original]
-    roundings = math.prod(len(o) for o in options)
-    if chosen is not None and not count_feasible:
-        return _rounding(base, here, original, chosen, roundings, None)
     combos = np.array(list(itertools.product(*options)), dtype=np.int64)  # (R, B)
+    roundings = len(combos)
     every = np.arange(0, n_angles, max(1, n_angles // COARSE_ANGLES))
     coarse = simulate(_with_lengths(base, combos), n_angles, only=every)
     alive = np.flatnonzero(coarse.valid.all(axis=1))
@@ -235,30 +232,17 @@ def _closest_rounding(
             f"fully in simulation and the least stretch among them is {closest:.3f} modules"
         )
     lengths = combos[best] if chosen is None else chosen
-    return _rounding(base, here, original, lengths, roundings, feasible if count_feasible else None)
-
-
-def _rounding(
-    base: LinkageBatch,
-    here: Motion,
-    original: np.ndarray,
-    lengths: np.ndarray,
-    roundings: int,
-    feasible: int | None,
-) -> _Rounding:
-    """Returns the `_Rounding` of one linkage (`base`, its motion `here`) built with
-    `lengths` (B,)."""
     one = _with_lengths(base, lengths[None])
-    motion = simulate(one, here.valid.shape[1])
+    motion = simulate(one, n_angles)
     return _Rounding(
         lengths=lengths,
         batch=one,
         motion=motion,
         original=original,
         here=here,
-        mean_shift=float(_shifts(motion, here, np.arange(here.valid.shape[1]))[0]),
+        mean_shift=float(_shifts(motion, here, np.arange(n_angles))[0]),
         roundings=roundings,
-        feasible=feasible,
+        feasible=feasible if count_feasible else None,
     )
 
 
