@@ -25,12 +25,14 @@ from linkevo.workers.plots.repertoire import (
 from linkevo.workers.store.tables import bin_columns, fold_bins, space_of
 
 CONVERGENCE_METRICS: tuple[tuple[str, str], ...] = (
-    ("best_loss", "best loss (lower is better)"),
-    ("coverage", "coverage, own grid (higher is better)"),
-    ("qd_score", "QD-score, own grid (higher is better)"),
-    ("common_coverage", "coverage, common grid (higher is better)"),
-    ("common_qd_score", "QD-score, common grid (higher is better)"),
+    ("best_loss", "best loss"),
+    ("coverage", "coverage, own grid"),
+    ("qd_score", "QD-score, own grid"),
+    ("common_coverage", "coverage, common grid"),
+    ("common_qd_score", "QD-score, common grid"),
 )
+LOWER_IS_BETTER = frozenset({"best_loss"})
+"""The convergence measures where lower is better (the others: higher)."""
 MAX_DIMS = 4
 """The most descriptor dimensions a map has (bin_0..bin_3)."""
 PAGE_WIDTH_IN = 6.5
@@ -369,7 +371,7 @@ def convergence_figure(grid: GridData) -> ReportFigure | None:
                 ax.plot(x, q[0.5], lw=1.2, label=label(approach), color=f"C{i}")
                 ax.fill_between(x, q[0.25], q[0.75], color=f"C{i}", alpha=0.2, lw=0)
             ax.set_title(f"{name}, {label(fitness)}")
-            ax.set_ylabel(name)
+            ax.set_ylabel(f"{'lower' if metric in LOWER_IS_BETTER else 'higher'} is better")
             ax.xaxis.set_major_locator(MaxNLocator(4))
             thousands(ax)
             ax.tick_params(labelbottom=True)
