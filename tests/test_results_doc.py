@@ -1,6 +1,6 @@
 """docs/results.md says what its findings.csv tables say: each claim's verdict words in the
 claims table, the count of verdicts that move from 10 to 30 trials, and "shown alike"
-only where the rule shows it."""
+only where the rule shows it; and each findings.csv follows from its folder's tables."""
 
 from __future__ import annotations
 
@@ -10,7 +10,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from linkevo.orchestrator.report.verdicts import STRENGTH
+from linkevo.orchestrator.report.findings import MEASURES
+from linkevo.orchestrator.report.published import changed_claims, read_folder, table_findings
+from linkevo.orchestrator.report.verdicts import NOT_TESTABLE, STRENGTH
 from linkevo.sim.study import label
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -100,3 +102,17 @@ def test_shown_alike_only_where_the_rule_shows_it():
     } | {0}
     for said in re.findall(r"(\w+) pairs (?:are )?shown alike", text):
         assert WORDS.index(said) in counts, said
+
+
+@pytest.mark.parametrize("folder", COLUMNS)
+def test_every_claim_recomputes_from_its_folders_tables(folder):
+    """findings.csv follows, claim by claim and word for word, from the folder's
+    trials.csv and path_sizes.csv alone (`linkevo findings`), the per-trial measures of
+    claims 6, 7 and 12 included."""
+    path = ROOT / "docs" / "results" / folder
+    trials = pd.read_csv(path / "trials.csv")
+    assert set(MEASURES) <= set(trials.columns)
+    recomputed = table_findings(*read_folder(path))
+    assert changed_claims(recomputed, findings(folder)) == []
+    judged = recomputed[recomputed.number.isin(["6", "7", "12"])]
+    assert len(judged) == 4 and NOT_TESTABLE not in set(judged.verdict)

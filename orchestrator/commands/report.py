@@ -1,4 +1,6 @@
-"""Provides `linkevo report`: a grid's figures, statistics and findings from MLflow."""
+"""Provides `linkevo report` (a grid's figures, statistics and findings from MLflow),
+`linkevo compare` (two grids' best losses side by side) and `linkevo findings` (a report's
+claims judged again from its folder's tables)."""
 
 from __future__ import annotations
 
@@ -9,8 +11,6 @@ from pathlib import Path
 from linkevo.orchestrator.cli import CliError
 from linkevo.orchestrator.commands import options
 from linkevo.workers.store import run_layout as layout
-
-"""What a grid id may hold (it goes into an MLflow filter string)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -42,6 +42,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="report only the first N trials of each approach and fitness (a grown grid's "
         "answer at N trials; logged under report-first<N>/) (default: all)",
     )
+    parser.add_argument(
+        "--with",
+        dest="more_grids",
+        action="append",
+        default=[],
+        metavar="GRID_ID",
+        help="another grid of the same study (split by approach or fitness), reported with "
+        "the first as one; its config may differ only in approaches, fitnesses and trials "
+        "(repeatable) (default: none)",
+    )
     parser.set_defaults(func=handler)
 
     compare = subparsers.add_parser(
@@ -63,6 +73,33 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     options.force(compare)
     compare.set_defaults(func=compare_handler)
 
+    findings = subparsers.add_parser(
+        "findings",
+        help="judge the study's claims again from a report folder's tables alone",
+        description=(
+            "Recomputes every claim of a report folder (docs/results/*/) from its trials.csv "
+            "and path_sizes.csv, with no store, prints the verdicts and says where they "
+            "differ from the folder's findings.csv. --measures-from fills the per-trial "
+            "measures a trials.csv predates from the report of a rerun of its trials."
+        ),
+    )
+    findings.add_argument("folder", type=Path, help="a report's folder, e.g. docs/results/paper")
+    findings.add_argument(
+        "--measures-from",
+        type=Path,
+        action="append",
+        default=[],
+        metavar="CSV",
+        help="the trials.csv of a report of the same trials run again (same seeds); each "
+        "rerun trial must log what the published one did (repeatable) (default: none)",
+    )
+    findings.add_argument(
+        "--write",
+        action="store_true",
+        help="write the folder's findings.csv (and its trials.csv with the measures taken)",
+    )
+    findings.set_defaults(func=findings_handler)
+
 
 def handler(args: argparse.Namespace) -> int:
     """Builds the report and prints where it is and the findings' verdicts."""
@@ -70,11 +107,12 @@ def handler(args: argparse.Namespace) -> int:
     from linkevo.orchestrator.report.build import report_folder
     from linkevo.workers.store.tracking import require_store, resolve_tracking_uri
 
-    if args.grid_id is not None and not layout.ID_PATTERN.fullmatch(args.grid_id):
-        raise CliError(
-            f"grid id {args.grid_id!r} is invalid; allowed: letters, digits, '.', '_', '-' "
-            "(see the grid_id tag of a grid run, or use --latest)"
-        )
+    for grid_id in [args.grid_id, *args.more_grids]:
+        if grid_id is not None and not layout.ID_PATTERN.fullmatch(grid_id):
+            raise CliError(
+                f"grid id {grid_id!r} is invalid; allowed: letters, digits, '.', '_', '-' "
+                "(see the grid_id tag of a grid run, or use --latest)"
+            )
     if args.trials is not None and args.trials < 1:
         raise CliError(f"--trials {args.trials} is invalid; allowed: an integer >= 1")
     if args.out is not None:
@@ -88,6 +126,7 @@ def handler(args: argparse.Namespace) -> int:
             experiment=args.experiment,
             log_to_mlflow=not args.no_log,
             first_trials=args.trials,
+            more_grids=args.more_grids,
         )
     except ReportNotLogged as exc:
         print(f"linkevo report: {exc}", file=sys.stderr)
@@ -132,4 +171,52 @@ def compare_handler(args: argparse.Namespace) -> int:
     if args.out is not None:
         write_text_atomic(args.out, table.to_csv(index=False))
         print(f"written to {args.out}")
+    return 0
+
+
+def findings_handler(args: argparse.Namespace) -> int:
+    """Prints a report folder's claims judged from its tables, and where they differ from
+    its findings.csv; with --write, writes them (and the measures taken) into the folder."""
+    import pandas as pd
+
+    from linkevo.orchestrator.report.compare import read_trials_csv
+    from linkevo.orchestrator.report.published import (
+        add_measures,
+        changed_claims,
+        read_folder,
+        table_findings,
+    )
+    from linkevo.workers.store.artifacts import write_text_atomic
+
+    folder = args.folder
+    if not (folder / "trials.csv").is_file():
+        raise CliError(
+            f"{str(folder)!r} holds no trials.csv; allowed: a report's folder "
+            "(docs/results/paper, reports/GRID_ID)"
+        )
+    for path in args.measures_from:
+        if not path.is_file():
+            raise CliError(
+                f"--measures-from {str(path)!r} does not exist; allowed: a report's trials.csv"
+            )
+    if args.write:
+        options.output_folder(folder, "folder")
+    trials, sizes = read_folder(folder)
+    if args.measures_from:
+        reruns = pd.concat([read_trials_csv(str(p)) for p in args.measures_from])
+        trials = add_measures(trials, reruns)
+    findings = table_findings(trials, sizes)
+    for row in findings.itertuples():
+        print(f"  [{row.verdict}] {row.number} {row.fitness} {row.claim} {row.evidence}")
+    published = folder / "findings.csv"
+    if published.is_file():
+        changed = changed_claims(findings, pd.read_csv(published, dtype=str))
+        print(
+            f"{published}: " + ("the same" if not changed else "differs on " + ", ".join(changed))
+        )
+    if args.write:
+        if args.measures_from:
+            write_text_atomic(folder / "trials.csv", trials.to_csv(index=False))
+        write_text_atomic(published, findings.to_csv(index=False))
+        print(f"written to {folder}")
     return 0

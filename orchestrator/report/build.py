@@ -9,7 +9,7 @@ import os
 import secrets
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +25,7 @@ from linkevo.orchestrator.report.checks import (
 )
 from linkevo.orchestrator.report.findings import MEASURES, check_findings
 from linkevo.orchestrator.report.html import render_html
-from linkevo.orchestrator.report.load import GridData, load_grid
+from linkevo.orchestrator.report.load import GridData, load_grid, merge_grids
 from linkevo.orchestrator.report.measures import best_path_sizes, trial_measures
 from linkevo.orchestrator.report.stats import pairwise_tests, summary_table
 from linkevo.orchestrator.report.verdicts import Finding
@@ -34,6 +34,7 @@ from linkevo.workers.store.artifacts import write_bytes_atomic
 from linkevo.workers.store.runs import RunStore
 
 REPORT_ARTIFACT_DIR = "report"
+"""Where the report lands among the grid parent run's artefacts."""
 
 
 def report_folder(first_trials: int | None) -> str:
@@ -41,8 +42,18 @@ def report_folder(first_trials: int | None) -> str:
     return REPORT_ARTIFACT_DIR if first_trials is None else f"report-first{first_trials}"
 
 
-"""Where the report lands among the grid parent run's artefacts."""
 PNG_DPI = 150
+LOGGED_COLUMNS: tuple[str, ...] = (
+    "best_loss",
+    "coverage",
+    "qd_score",
+    "common_coverage",
+    "common_qd_score",
+    "path_diversity",
+    "final_evaluations",
+)
+"""The numbers of `trials.csv` each trial logs itself (the `MEASURES` are computed from
+its history and archive by the report)."""
 TRIAL_COLUMNS: tuple[str, ...] = (
     "trial_key",
     "approach",
@@ -52,13 +63,7 @@ TRIAL_COLUMNS: tuple[str, ...] = (
     "run_id",
     "status",
     "error",
-    "best_loss",
-    "coverage",
-    "qd_score",
-    "common_coverage",
-    "common_qd_score",
-    "path_diversity",
-    "final_evaluations",
+    *LOGGED_COLUMNS,
     *MEASURES,
 )
 
@@ -120,6 +125,7 @@ def build_report(
     experiment: str = "linkevo",
     log_to_mlflow: bool = True,
     first_trials: int | None = None,
+    more_grids: Sequence[str] = (),
 ) -> ReportResult:
     """Returns the report of one grid (None: the latest), written to `out_dir`.
 
@@ -131,10 +137,17 @@ def build_report(
     `report/` in the grid's parent run. `out_dir` defaults to `reports/<grid_id>`.
     With `first_trials` = N only trial indices 0..N-1 of each cell count (a grid grown by
     `--resume --set trials=...` answered at its first N trials); the report goes to
-    `reports/<grid_id>-first<N>` and `report-first<N>/`.
+    `reports/<grid_id>-first<N>` and `report-first<N>/`. With `more_grids`, those grids
+    are reported with the first as one study (`load.merge_grids`: a study split into grids
+    by approach or fitness), in `reports/<id>+<id>...`, logged in the first's parent run.
     """
     with tempfile.TemporaryDirectory(prefix="linkevo-report-") as cache:
-        grid = load_grid(tracking_uri, grid_id, Path(cache), experiment, first_trials)
+        grid = merge_grids(
+            [
+                load_grid(tracking_uri, g, Path(cache) / str(i), experiment, first_trials)
+                for i, g in enumerate([grid_id, *more_grids])
+            ]
+        )
         name = grid.grid_id if first_trials is None else f"{grid.grid_id}-first{first_trials}"
         out = Path(out_dir) if out_dir is not None else Path("reports") / name
         summary = summary_table(grid.trials)

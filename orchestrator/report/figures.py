@@ -231,6 +231,8 @@ def repertoire_maps_figure(grid: GridData) -> ReportFigure | None:
             cells = (
                 f"POOLED over {own.size} {grids},\n{int(np.isfinite(image).sum()):,} cells "
                 f"filled; each trial {own.median():.2f} of its own"
+                if own.size
+                else "no finished trial"
             )
             ax.set_title(
                 f"{label(approach)}, {label(fitness)}: {cells}\n"

@@ -1,4 +1,5 @@
-"""Provides `load_grid`: one grid's trial runs, metric histories and archives as pandas."""
+"""Provides `load_grid`: one grid's trial runs, metric histories and archives as pandas;
+and `merge_grids`: several grids of one study as one."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from linkevo.orchestrator.config import ConfigError, from_dict
+from linkevo.orchestrator.config import EXECUTION_KEYS, ConfigError, from_dict
+from linkevo.sim.errors import LinkevoError
 from linkevo.sim.study import APPROACHES, FITNESSES, ordered
 from linkevo.workers.store import run_layout as layout
 from linkevo.workers.store.runs import NotFound, RunStore, latest_per_trial
@@ -147,6 +149,61 @@ def load_grid(
         config=config,
         trials=trials,
         history=history,
+    )
+
+
+class GridsDiffer(LinkevoError, ValueError):
+    """Grids that are not parts of one study (their configs differ beyond what they run)."""
+
+
+SPLIT_KEYS: frozenset[str] = frozenset({"approaches", "fitnesses", "trials"})
+"""Config keys in which grids that make one study may differ: a study split into grids by
+approach or fitness (on several machines, say), or grown apart."""
+
+
+def merge_grids(grids: list[GridData]) -> GridData:
+    """Returns several grids as one study, reported together: their trials and histories
+    side by side, the config of the first with every grid's approaches and fitnesses and
+    the most trials; the grid id joins theirs with "+", the report is logged in the
+    first grid's parent run.
+
+    Raises:
+        GridsDiffer: naming the key and values, when two configs differ in a key that
+            changes what a trial computes (any but `SPLIT_KEYS` and `EXECUTION_KEYS`),
+            or naming the trial, when one trial key is in two grids.
+    """
+    first = grids[0]
+    if len(grids) == 1:
+        return first
+    ignored = SPLIT_KEYS | EXECUTION_KEYS
+    for grid in grids[1:]:
+        for key in sorted((set(first.config) | set(grid.config)) - ignored):
+            if first.config.get(key) != grid.config.get(key):
+                raise GridsDiffer(
+                    f"grids {first.grid_id} and {grid.grid_id} differ in {key} "
+                    f"({first.config.get(key)!r} against {grid.config.get(key)!r}); allowed: "
+                    "grids that differ only in approaches, fitnesses and trials"
+                )
+    trials = pd.concat([g.trials for g in grids], ignore_index=True)
+    twice = trials.trial_key[trials.trial_key.duplicated()]
+    if len(twice):
+        raise GridsDiffer(
+            f"trial {twice.iloc[0]} is in more than one of the grids; allowed: grids with "
+            "different approaches or fitnesses"
+        )
+    config = {
+        **first.config,
+        "approaches": ordered(trials.approach.unique(), APPROACHES),
+        "fitnesses": ordered(trials.fitness.unique(), FITNESSES),
+        "trials": max(int(g.config.get("trials", 0)) for g in grids),
+    }
+    return GridData(
+        grid_id="+".join(g.grid_id for g in grids),
+        parent_run_id=first.parent_run_id,
+        tracking_uri=first.tracking_uri,
+        config=config,
+        trials=trials,
+        history=pd.concat([g.history for g in grids], ignore_index=True),
     )
 
 

@@ -6,6 +6,7 @@ import base64
 import html
 import io
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -322,6 +323,10 @@ def test_a_cell_with_only_failed_trials_still_reports(tmp_path):
     assert result.tests.empty
     assert (tmp_path / "out" / "best_loss.png").is_file()
     assert "not finished" in result.html.read_text() or "did not finish" in result.html.read_text()
+    maps = fig.repertoire_maps_figure(load_grid(written.uri, "g0broken", tmp_path / "cache")).figure
+    assert [ax.get_title() for ax in maps.axes if ax.get_title()] == [
+        "MAP-LIS, F_p: no finished trial\n0 of 2 trials; 2 failed or missing"
+    ]
 
 
 def test_cli_reports_latest_grid_and_names_unknown_grids(grid, tmp_path, capsys):
@@ -555,3 +560,76 @@ def test_a_walking_grids_winners_are_tabled_with_the_ones_to_doubt_named():
         "its feet sliding</li>" in page
     )
     assert "MAP-LIS/Fw/00:" not in page
+
+
+def test_findings_recompute_from_a_report_folder_and_take_a_reruns_measures(grid, tmp_path, capsys):
+    """A report's folder judges its claims again from its tables alone; a copy whose
+    trials.csv predates the per-trial measures gets them from a rerun's table, and then
+    judges as the report did; a rerun that logged other numbers gives nothing."""
+    import shutil
+
+    from linkevo.orchestrator.report.findings import MEASURES
+
+    _, result = grid
+    assert main(["findings", str(result.out_dir)]) == 0
+    assert f"{result.out_dir / 'findings.csv'}: the same" in capsys.readouterr().out
+    old = tmp_path / "old"
+    shutil.copytree(result.out_dir, old)
+    full = pd.read_csv(result.out_dir / "trials.csv")
+    assert full.stagnation.notna().sum() > 0 and full.front_size.notna().sum() > 0
+    full.drop(columns=list(MEASURES)).to_csv(old / "trials.csv", index=False)
+    assert main(["findings", str(old)]) == 0
+    out = capsys.readouterr().out
+    assert "differs on 6 Fp" in out and "[not testable] 7" in out
+
+    rerun = tmp_path / "rerun.csv"
+    changed = full.copy()
+    changed.loc[3, "best_loss"] += 1e-12
+    changed.to_csv(rerun, index=False)
+    args = ["findings", str(old), "--measures-from", str(rerun), "--write"]
+    assert main(args) == 2
+    assert f"trial {full.trial_key[3]}: the rerun logged best_loss" in capsys.readouterr().err
+    assert "stagnation" not in pd.read_csv(old / "trials.csv")
+
+    halves = [tmp_path / "a.csv", tmp_path / "b.csv"]
+    full.iloc[::2].to_csv(halves[0], index=False)
+    full.iloc[1::2].to_csv(halves[1], index=False)
+    args = ["findings", str(old), "--write"]
+    assert main([*args, "--measures-from", str(halves[0]), "--measures-from", str(halves[1])]) == 0
+    assert f"{old / 'findings.csv'}: the same" in capsys.readouterr().out
+    pd.testing.assert_frame_equal(pd.read_csv(old / "trials.csv"), full)
+    assert (old / "findings.csv").read_text() == (result.out_dir / "findings.csv").read_text()
+    assert main(["findings", str(tmp_path / "nowhere")]) == 2
+    assert "holds no trials.csv" in capsys.readouterr().err
+
+
+def test_grids_split_by_approach_report_as_one_study(tmp_path, capsys):
+    """Two grids of one study, split by approach, give one report: each trial as its own
+    grid's report has it, claims judged across both, logged in the first's parent run;
+    grids that compute differently, or hold one trial twice, are refused by name."""
+    left = write_grid(tmp_path / "a", GridSpec(grid_id="g0left", approaches=("EA", "NSGA2")))
+    spec = GridSpec(grid_id="g0right", approaches=("MAP-WH", "MAP-ST"))
+    write_grid(tmp_path / "b", spec, server_uri=left.uri)
+    out = tmp_path / "both"
+    args = ["report", "g0left", "--with", "g0right", "--tracking-uri", left.uri, "--out", str(out)]
+    assert main(args) == 0
+    assert "grid g0left+g0right: report at" in capsys.readouterr().out
+    both = pd.read_csv(out / "trials.csv")
+    apart = [
+        build_report(left.uri, g, tmp_path / g, log_to_mlflow=False) for g in ("g0left", "g0right")
+    ]
+    each = pd.concat([pd.read_csv(r.out_dir / "trials.csv") for r in apart], ignore_index=True)
+    pd.testing.assert_frame_equal(both, each)
+    verdicts = pd.read_csv(out / "findings.csv", dtype=str).set_index(["number", "fitness"]).verdict
+    assert verdicts["1", "Fp"] != NOT_TESTABLE  # MAP-WH against the EA: across the grids
+    logged = MlflowClient(tracking_uri=left.uri).list_artifacts(left.parent_run_id, "report")
+    assert "report/findings.csv" in {a.path for a in logged}
+
+    cheap = GridSpec(grid_id="g0cheap", approaches=("MAP-LIS",), budget=1000)
+    write_grid(tmp_path / "c", cheap, server_uri=left.uri)
+    assert main([*args[:3], "g0cheap", *args[4:6], "--out", str(tmp_path / "x")]) == 2
+    assert "grids g0left and g0cheap differ in evaluations" in capsys.readouterr().err
+    assert main([*args[:3], "g0left", *args[4:6], "--out", str(tmp_path / "y")]) == 2
+    twice = re.search(r"trial (\S+) is in more than one of the grids", capsys.readouterr().err)
+    assert twice and twice.group(1) in set(left.run_ids)
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
