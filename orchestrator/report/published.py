@@ -95,8 +95,8 @@ def add_measures(published: pd.DataFrame, reruns: pd.DataFrame) -> pd.DataFrame:
             was, now = mine.at[key, column], rerun.at[key, column]
             if not (was == now or (pd.isna(was) and pd.isna(now))):
                 raise NotReproduced(
-                    f"trial {key}: the rerun logged {column} {now!r}, the published table "
-                    f"{was!r}; only a rerun from the same seed at code that reproduces it "
+                    f"trial {key}: the rerun logged {column} {now}, the published table "
+                    f"{was}; only a rerun from the same seed at code that reproduces it "
                     "can give its measures"
                 )
     for column in MEASURES:
